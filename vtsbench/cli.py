@@ -1,0 +1,173 @@
+"""The `vtsbench` command. Start-up imports only typer; every command imports its work lazily."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+app = typer.Typer(
+    name="vtsbench",
+    help="Benchmark toolkit for visuo-tactile sensing: recordings -> calibrated RGB-D datasets "
+         "-> loaders, baselines and scoring.",
+    no_args_is_help=True,
+    rich_markup_mode="rich",
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+
+
+def _fail(err: Exception, code: int = 2) -> None:
+    """Print a user error as one line and exit (no traceback)."""
+    typer.echo(f"error: {err}", err=True)
+    raise typer.Exit(code)
+
+
+def _run(fn, *args, **kwargs):
+    """Run a command body, turning user errors (VtsError) into a one-line message and exit 2."""
+    from .errors import VtsError
+
+    try:
+        return fn(*args, **kwargs)
+    except VtsError as e:
+        _fail(e)
+    except KeyboardInterrupt:
+        typer.echo("interrupted: nothing was written under the output's final name", err=True)
+        raise typer.Exit(130) from None
+
+
+def _parse_size(text: str) -> tuple[int, int]:
+    try:
+        h, w = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise typer.BadParameter(f"expected HxW such as 480x640, got {text!r}") from None
+    if h < 1 or w < 1:
+        raise typer.BadParameter("height and width must be positive")
+    return h, w
+
+
+@app.command()
+def simulate(
+    out: Annotated[Path, typer.Argument(help="Recordings folder to create.")],
+    seed: Annotated[int, typer.Option(help="Random seed; the same seed writes identical files.")] = 0,
+    static: Annotated[int, typer.Option("--static", min=0, help="Static frames.")] = 30,
+    sequences: Annotated[int, typer.Option("--sequences", min=0,
+                                           help="Sequences (static, press and slip, balanced).")] = 30,
+    presses: Annotated[int, typer.Option("--presses", min=0,
+                                         help="Calibration presses of a 3 mm-radius sphere.")] = 20,
+    objects: Annotated[int, typer.Option("--objects", min=1, max=15,
+                                         help="Number of object classes to use (of 15).")] = 15,
+    size: Annotated[str, typer.Option(help="Frame size HxW.")] = "480x640",
+    frames: Annotated[int, typer.Option(min=2, help="Frames per sequence.")] = 8,
+    sessions: Annotated[int, typer.Option(min=1, help="Sessions (backgrounds, noise draws).")] = 3,
+    mm_per_px: Annotated[float, typer.Option(min=1e-4, help="Scale of the sensor, mm per pixel.")] = 0.03,
+    workers: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 1,
+    overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
+    quiet: Annotated[bool, typer.Option(help="No progress bar.")] = False,
+) -> None:
+    """Write a synthetic recordings folder with exact ground-truth depth and gradients.
+
+    Example: [bold]vtsbench simulate data/sim --seed 0 --static 30 --sequences 30 --presses 20[/]
+    """
+    from .sim.simulate import simulate as run_sim
+
+    m = _run(run_sim, out, seed=seed, n_static=static, n_sequences=sequences, n_presses=presses,
+             n_objects=objects, size=_parse_size(size), frames=frames, n_sessions=sessions,
+             mm_per_px=mm_per_px, workers=workers, overwrite=overwrite, progress=not quiet)
+    typer.echo(f"wrote {len(m.entries)} entries in {len(m.sessions)} sessions to {out}")
+
+
+@app.command()
+def check(
+    folder: Annotated[Path, typer.Argument(help="Recordings folder (with recordings.json).")],
+    deep: Annotated[bool, typer.Option(help="Decode every frame of every video (slow).")] = False,
+    workers: Annotated[int, typer.Option(min=1, help="Threads reading media.")] = 2,
+) -> None:
+    """Validate a recordings folder and list every problem; exit 1 if there is any.
+
+    Checks the manifest against its schema, then every entry: files present and decodable,
+    frame ranges inside the video or folder, resolution as the session says, labels in range
+    and consistent (a direction only on a slip), presses with a ball radius.
+    """
+    from rich.console import Console
+
+    from .recordings.check import check_folder
+
+    report = _run(check_folder, folder, deep=deep, workers=workers)
+    console = Console(stderr=False, highlight=False)
+    for w in report.warnings:
+        console.print(f"[yellow]warning[/] {w}", soft_wrap=True)
+    for p in report.problems:
+        console.print(f"[red]problem[/] {p}", soft_wrap=True)
+    console.print(f"{report.n_entries} entries, {report.n_frames} frames checked: "
+                  f"{len(report.problems)} problem(s), {len(report.warnings)} warning(s)")
+    if report.problems:
+        raise typer.Exit(1)
+
+
+@app.command()
+def manifest(
+    folder: Annotated[Path, typer.Argument(help="Folder of existing files to describe.")],
+    pattern: Annotated[str, typer.Option(
+        help="File-name pattern relative to FOLDER, e.g. '{object}_{take}.mov'. Fields: object, "
+             "take, session, state, direction; '{name:d}' matches digits only; fields match "
+             "greedily from the left; '/' matches sub-folders.")],
+    kind: Annotated[Optional[str], typer.Option(
+        help="static, sequence or press (default: sequence for videos and image folders, "
+             "static for images).")] = None,
+    sensor: Annotated[str, typer.Option(help="Sensor id.")] = "unknown",
+    session: Annotated[str, typer.Option(help="Session id when the pattern has no {session}.")] = "s0",
+    mm_per_px: Annotated[Optional[float], typer.Option(help="mm per pixel, if known.")] = None,
+    fps: Annotated[Optional[float], typer.Option(help="Frame rate (default: read from videos).")] = None,
+    background: Annotated[Optional[str], typer.Option(
+        help="No-contact frame, relative to FOLDER.")] = None,
+    ball_radius_mm: Annotated[Optional[float], typer.Option(
+        help="Ball radius in mm for presses.")] = None,
+    circles: Annotated[Optional[Path], typer.Option(
+        help="CSV of press circles: a file column (file|img_names|image|name) and x|center_x, "
+             "y|center_y, r|radius in pixels.")] = None,
+    window: Annotated[Optional[int], typer.Option(
+        min=1, help="Cut videos and folders into sequences of this many frames.")] = None,
+    stride: Annotated[Optional[int], typer.Option(min=1, help="Step between windows.")] = None,
+    force: Annotated[bool, typer.Option(help="Replace an existing recordings.json.")] = False,
+) -> None:
+    """Write recordings.json for a folder of existing files, matched by a file-name pattern.
+
+    Example: [bold]vtsbench manifest octopi_videos --pattern '{object}_{take}.mov' --sensor gsmini[/]
+    """
+    from .recordings.importer import ManifestOptions, write_pattern_manifest
+
+    opts = ManifestOptions(pattern=pattern, kind=kind, sensor=sensor, session=session,
+                           mm_per_px=mm_per_px, fps=fps, background=background,
+                           ball_radius_mm=ball_radius_mm, circles=circles, window=window,
+                           stride=stride, force=force)
+    m, path = _run(write_pattern_manifest, folder, opts)
+    typer.echo(f"wrote {path}: {len(m.entries)} entries in {len(m.sessions)} session(s)")
+
+
+@app.command()
+def preview(
+    folder: Annotated[Path, typer.Argument(help="Recordings folder.")],
+    out: Annotated[Path, typer.Option("--out", help="PNG to write.")] = Path("preview.png"),
+    n: Annotated[int, typer.Option(min=1, help="Entries to show.")] = 12,
+    seed: Annotated[int, typer.Option(help="Which entries to pick (spread over kinds).")] = 0,
+) -> None:
+    """Write a contact sheet: frames with their labels and, for simulated data, the true depth."""
+    from .preview import write_preview
+
+    shown = _run(write_preview, folder, out, n=n, seed=seed)
+    typer.echo(f"wrote {out} ({shown} entries)")
+
+
+# -- collect: registered below --
+
+
+def main() -> None:
+    """Console entry point."""
+    app(prog_name="vtsbench")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,147 @@
+"""Frame access for the three kinds of source: image file, image folder, video file.
+
+Every function returns RGB uint8 (H, W, 3), whatever OpenCV's BGR order on disk; this is the only
+place where the channel order is converted, so it cannot be converted twice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import VtsError
+
+IMAGE_EXTS = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp"})
+VIDEO_EXTS = frozenset({".mov", ".mp4", ".avi", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg"})
+
+
+def _cv2():
+    import cv2
+
+    return cv2
+
+
+def media_kind(path: Path) -> str:
+    """'folder', 'image' or 'video' by what the path is; raises VtsError for anything else."""
+    if path.is_dir():
+        return "folder"
+    ext = path.suffix.lower()
+    if ext in IMAGE_EXTS:
+        return "image"
+    if ext in VIDEO_EXTS:
+        return "video"
+    raise VtsError(f"unsupported file type '{ext}' (images: {', '.join(sorted(IMAGE_EXTS))}; "
+                   f"videos: {', '.join(sorted(VIDEO_EXTS))})", path)
+
+
+def folder_frames(path: Path) -> list[Path]:
+    """Image files of an image folder, in file-name order."""
+    return sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_EXTS)
+
+
+def read_image(path: Path) -> np.ndarray:
+    """One image file as RGB uint8; one-line error if missing or undecodable."""
+    cv2 = _cv2()
+    if not path.is_file():
+        raise VtsError("file not found", path)
+    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if img is None:
+        raise VtsError("cannot decode image", path)
+    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+
+
+@dataclass(frozen=True)
+class Probe:
+    """What a source holds: number of frames and frame size."""
+
+    kind: str
+    n_frames: int
+    height: int
+    width: int
+
+
+def probe(path: Path) -> Probe:
+    """Frame count and size of a source, reading as little as possible."""
+    if not path.exists():
+        raise VtsError("file not found", path)
+    kind = media_kind(path)
+    if kind == "image":
+        img = read_image(path)
+        return Probe(kind, 1, img.shape[0], img.shape[1])
+    if kind == "folder":
+        files = folder_frames(path)
+        if not files:
+            raise VtsError("image folder holds no images", path)
+        img = read_image(files[0])
+        return Probe(kind, len(files), img.shape[0], img.shape[1])
+    cv2 = _cv2()
+    cap = cv2.VideoCapture(str(path))
+    try:
+        if not cap.isOpened():
+            raise VtsError("cannot open video (unknown codec or corrupt file)", path)
+        ok, frame = cap.read()
+        if not ok or frame is None:
+            raise VtsError("cannot decode video (no readable frame)", path)
+        n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        return Probe(kind, n, frame.shape[0], frame.shape[1])
+    finally:
+        cap.release()
+
+
+def read_frames(path: Path, start: int = 0, stop: int | None = None) -> np.ndarray:
+    """Frames [start, stop) of a source as RGB uint8 (T, H, W, 3)."""
+    kind = media_kind(path) if path.exists() else None
+    if kind is None:
+        raise VtsError("file not found", path)
+    if kind == "image":
+        if start != 0 or (stop is not None and stop != 1):
+            raise VtsError(f"an image file holds one frame, asked for [{start}, {stop})", path)
+        return read_image(path)[None]
+    if kind == "folder":
+        files = folder_frames(path)
+        stop = len(files) if stop is None else stop
+        if stop > len(files) or start >= stop:
+            raise VtsError(f"frame range [{start}, {stop}) outside the {len(files)} images", path)
+        return np.stack([read_image(f) for f in files[start:stop]])
+    return _read_video(path, start, stop)
+
+
+def _read_video(path: Path, start: int, stop: int | None) -> np.ndarray:
+    cv2 = _cv2()
+    cap = cv2.VideoCapture(str(path))
+    try:
+        if not cap.isOpened():
+            raise VtsError("cannot open video (unknown codec or corrupt file)", path)
+        if start:
+            cap.set(cv2.CAP_PROP_POS_FRAMES, start)
+        frames = []
+        i = start
+        while stop is None or i < stop:
+            ok, frame = cap.read()
+            if not ok:
+                break
+            frames.append(cv2.cvtColor(frame, cv2.COLOR_BGR2RGB))
+            i += 1
+    finally:
+        cap.release()
+    if not frames or (stop is not None and len(frames) < stop - start):
+        raise VtsError(f"frame range [{start}, {stop}) past the end of the video "
+                       f"({start + len(frames)} frames decoded)", path)
+    return np.stack(frames)
+
+
+def read_frame(path: Path, index: int = 0) -> np.ndarray:
+    """One frame of a source as RGB uint8 (H, W, 3)."""
+    return read_frames(path, index, index + 1)[0]
+
+
+def write_png(path: Path, rgb: np.ndarray, compression: int = 1) -> None:
+    """Write RGB uint8 as PNG (OpenCV writes BGR, so convert here and nowhere else)."""
+    cv2 = _cv2()
+    ok, buf = cv2.imencode(".png", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR),
+                           [cv2.IMWRITE_PNG_COMPRESSION, compression])
+    if not ok:
+        raise VtsError("cannot encode PNG", path)
+    path.write_bytes(buf.tobytes())
