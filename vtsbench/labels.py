@@ -13,8 +13,8 @@ from dataclasses import dataclass
 STATES: tuple[str, ...] = ("static", "press", "slip")
 N_DIRECTIONS = 8
 BIN_DEG = 360.0 / N_DIRECTIONS
-DIRECTION_NAMES: tuple[str, ...] = ("right", "up-right", "up", "up-left", "left", "down-left", "down",
-                                    "down-right")
+DIRECTION_NAMES: tuple[str, ...] = ("right", "up-right", "up", "up-left", "left", "down-left",
+                                    "down", "down-right")
 # Angles are rounded to this many decimals before binning, so that a motion built at exactly a
 # bin boundary (22.5 deg) lands in the upper bin despite the last-bit error of atan2.
 ANGLE_DECIMALS = 9
@@ -35,7 +35,7 @@ def angle_to_class(angle_deg: float) -> int:
     if not math.isfinite(angle_deg):
         raise ValueError(f"angle must be finite, got {angle_deg}")
     a = round(angle_deg, ANGLE_DECIMALS)
-    return int(math.floor(((a + BIN_DEG / 2) % 360.0) / BIN_DEG)) % N_DIRECTIONS
+    return math.floor(((a + BIN_DEG / 2) % 360.0) / BIN_DEG) % N_DIRECTIONS
 
 
 def direction_class(dx: float, dy: float, min_mm: float = SLIP_THRESHOLD_MM) -> int | None:

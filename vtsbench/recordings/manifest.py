@@ -1,4 +1,4 @@
-"""The recordings manifest (`recordings.json`): typed classes mirroring schemas/recording.schema.json.
+"""The recordings manifest (`recordings.json`): typed classes mirroring its JSON Schema.
 
 A recordings folder holds one manifest that refers to image files, image folders and video
 files in place by relative path. `load_manifest` validates against the JSON Schema first, so

@@ -1,0 +1,234 @@
+"""`vtsbench manifest`: describe a folder of existing files from a file-name pattern, in place."""
+
+from __future__ import annotations
+
+import csv
+import os
+import re
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from ..errors import VtsError
+from .manifest import MANIFEST_NAME, Circle, Entry, Labels, Manifest, Session, Source, save_manifest
+from .media import media_kind, probe
+
+FIELD_RE = re.compile(r"\{([A-Za-z_][A-Za-z0-9_]*)(?::([a-z]))?\}")
+LABEL_FIELDS = ("object", "take", "session", "state", "direction")
+CIRCLE_COLUMNS = {
+    "file": ("file", "img_names", "image", "name", "filename"),
+    "x": ("x", "center_x", "cx"),
+    "y": ("y", "center_y", "cy"),
+    "r": ("r", "radius"),
+}
+
+
+@dataclass(frozen=True)
+class ManifestOptions:
+    """What `vtsbench manifest` knows beyond the file names."""
+
+    pattern: str
+    kind: str | None = None
+    sensor: str = "unknown"
+    session: str = "s0"
+    mm_per_px: float | None = None
+    fps: float | None = None
+    background: str | None = None
+    ball_radius_mm: float | None = None
+    circles: Path | None = None
+    window: int | None = None
+    stride: int | None = None
+    force: bool = False
+    out: Path | None = None  # where recordings.json goes (default: the folder itself)
+
+
+def compile_pattern(pattern: str) -> re.Pattern[str]:
+    """Turn '{object}_{take:d}.mov' into a regex; fields are greedy and never cross '/'."""
+    out, pos, seen = "", 0, set()
+    for m in FIELD_RE.finditer(pattern):
+        name, typ = m.group(1), m.group(2)
+        if name in seen:
+            raise VtsError(f"pattern {pattern!r}: field '{{{name}}}' appears twice")
+        if typ not in (None, "d"):
+            raise VtsError(f"pattern {pattern!r}: unknown field type ':{typ}' (only ':d')")
+        seen.add(name)
+        out += re.escape(pattern[pos:m.start()])
+        out += f"(?P<{name}>\\d+)" if typ == "d" else f"(?P<{name}>[^/]+)"
+        pos = m.end()
+    out += re.escape(pattern[pos:].rstrip("/"))
+    if "{" in pattern[pos:] or "}" in pattern[pos:]:
+        raise VtsError(f"pattern {pattern!r}: unbalanced braces")
+    return re.compile(out + r"\Z")
+
+
+def match_files(folder: Path, pattern: str) -> list[tuple[str, dict[str, str]]]:
+    """Relative paths under folder matching the pattern (folders if it ends with '/'), sorted."""
+    rx = compile_pattern(pattern)
+    want_dirs = pattern.endswith("/")
+    found = []
+    for p in sorted(folder.rglob("*")):
+        if p.name.startswith(".") or p.is_dir() != want_dirs or p.name == MANIFEST_NAME:
+            continue
+        rel = p.relative_to(folder).as_posix()
+        m = rx.match(rel)
+        if m:
+            found.append((rel, m.groupdict()))
+    return found
+
+
+def _entry_id(rel: str) -> str:
+    stem = rel.rsplit(".", 1)[0] if "." in rel.rsplit("/", 1)[-1] else rel
+    return re.sub(r"[^A-Za-z0-9._-]+", "-", stem.strip("/")).strip("-._") or "entry"
+
+
+def _labels(fields: dict[str, str], rel: str) -> Labels:
+    state = fields.get("state")
+    if state is not None and state not in ("static", "press", "slip"):
+        raise VtsError(f"state '{state}' from the file name is not static, press or slip", rel)
+    direction = fields.get("direction")
+    if direction is not None:
+        if not direction.isdigit() or not 0 <= int(direction) <= 7:
+            raise VtsError(f"direction '{direction}' from the file name is not 0..7", rel)
+        direction = int(direction)
+    return Labels(state=state, direction=direction)
+
+
+def read_circles(path: Path) -> dict[str, Circle]:
+    """Read a circles CSV into {file name: Circle}; one-line errors naming the row."""
+    if not path.is_file():
+        raise VtsError("circles file not found", path)
+    with path.open(newline="", encoding="utf-8-sig") as fh:
+        reader = csv.DictReader(fh)
+        header = [h.strip().lower() for h in (reader.fieldnames or [])]
+        cols = {}
+        for key, names in CIRCLE_COLUMNS.items():
+            hit = [h for h in header if h in names]
+            if not hit:
+                raise VtsError(f"no '{key}' column (accepted: {', '.join(names)}); "
+                               f"found {', '.join(header) or 'no header'}", path)
+            cols[key] = (reader.fieldnames or [])[header.index(hit[0])]
+        out: dict[str, Circle] = {}
+        for i, row in enumerate(reader, start=2):
+            name = (row.get(cols["file"]) or "").strip()
+            try:
+                x, y, r = (float(row[cols[k]]) for k in ("x", "y", "r"))
+            except (TypeError, ValueError):
+                raise VtsError(f"row {i}: x, y and r must be numbers", path) from None
+            if not name or r <= 0:
+                raise VtsError(f"row {i}: needs a file name and a positive radius", path)
+            if name in out:
+                raise VtsError(f"row {i}: '{name}' listed twice", path)
+            out[name] = Circle(x, y, r)
+    return out
+
+
+def _circle_for(circles: dict[str, Circle], rel: str, used: set[str]) -> Circle | None:
+    """The circle whose file name matches rel by path, base name or stem (CSV paths may differ)."""
+    base = rel.rsplit("/", 1)[-1]
+    want = {rel, base, base.rsplit(".", 1)[0]}
+    for key, circle in circles.items():
+        kbase = key.replace("\\", "/").rsplit("/", 1)[-1]
+        if {key, kbase, kbase.rsplit(".", 1)[0]} & want:
+            used.add(key)
+            return circle
+    return None
+
+
+def build_pattern_manifest(folder: Path, opts: ManifestOptions) -> Manifest:
+    """A manifest for the files under folder that match opts.pattern (files stay in place)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise VtsError("not a folder", folder)
+    if opts.kind not in (None, "static", "sequence", "press"):
+        raise VtsError(f"unknown kind '{opts.kind}' (static, sequence or press)")
+    if opts.kind == "press" and opts.ball_radius_mm is None:
+        raise VtsError("presses need --ball-radius-mm")
+    if opts.circles is not None and opts.kind != "press":
+        raise VtsError("--circles applies to presses: add --kind press")
+    home = Path(opts.out) if opts.out is not None else folder
+
+    def ref(rel: str) -> str:  # a path relative to the manifest's folder
+        return Path(os.path.relpath(folder / rel, home)).as_posix()
+
+    bg_files = {opts.background} if opts.background and "{" not in opts.background else set()
+    matches = [(r, f) for r, f in match_files(folder, opts.pattern) if r not in bg_files]
+    if not matches:
+        raise VtsError(f"no file matches the pattern {opts.pattern!r}", folder)
+    circles = read_circles(opts.circles) if opts.circles else {}
+    used: set[str] = set()
+    stride = opts.stride or opts.window
+    entries: list[Entry] = []
+    session_probe: dict[str, tuple[int, int, float | None]] = {}
+    for rel, fields in matches:
+        path = folder / rel
+        pr = probe(path)
+        kind = opts.kind or ("static" if pr.kind == "image" else "sequence")
+        if kind == "sequence" and pr.kind == "image":
+            raise VtsError("a sequence needs a video or an image folder", path)
+        ses = fields.get("session", opts.session)
+        if ses not in session_probe:
+            session_probe[ses] = (pr.height, pr.width, _video_fps(path) if pr.kind == "video"
+                                  else None)
+        src = ref(rel)
+        base = Entry(id=_entry_id(rel), kind=kind, session=ses, source=Source(src),
+                     object=fields.get("object"), take=fields.get("take"),
+                     labels=_labels(fields, rel),
+                     meta={k: v for k, v in fields.items() if k not in LABEL_FIELDS})
+        if kind == "press":
+            base = replace(base, ball_radius_mm=opts.ball_radius_mm,
+                           circle=_circle_for(circles, rel, used),
+                           source=Source(src, frame=None if pr.kind == "image" else 0))
+        elif kind == "static" and pr.kind != "image":
+            base = replace(base, source=Source(src, frame=0))
+        if kind == "sequence" and opts.window:
+            if pr.n_frames < opts.window:
+                raise VtsError(f"{pr.n_frames} frames, fewer than --window {opts.window}", path)
+            for k, s in enumerate(range(0, pr.n_frames - opts.window + 1, stride)):
+                entries.append(replace(base, id=f"{base.id}-w{k:03d}",
+                                       source=Source(src, start=s, stop=s + opts.window)))
+        else:
+            entries.append(base)
+    unused = sorted(set(circles) - used)
+    if unused:
+        raise VtsError(f"{len(unused)} circle row(s) match no file of the pattern, first "
+                       f"'{unused[0]}'", opts.circles)
+    ids = [e.id for e in entries]
+    if len(set(ids)) != len(ids):
+        dup = next(i for i in ids if ids.count(i) > 1)
+        raise VtsError(f"two files map to the entry id '{dup}'; add a field to the pattern")
+    sessions = []
+    for sid, (h, w, vfps) in session_probe.items():
+        bg = opts.background.replace("{session}", sid) if opts.background else None
+        if bg is not None and not (folder / bg).exists():
+            raise VtsError("background file not found", folder / bg)
+        mm = None if opts.mm_per_px is None else (opts.mm_per_px, opts.mm_per_px)
+        sessions.append(Session(id=sid, sensor=opts.sensor, resolution=(h, w), mm_per_px=mm,
+                                fps=opts.fps or vfps, background=None if bg is None else ref(bg)))
+    return Manifest(sessions=sessions, entries=entries,
+                    created_by=f"vtsbench manifest --pattern {opts.pattern}")
+
+
+def _video_fps(path: Path) -> float | None:
+    import cv2
+
+    cap = cv2.VideoCapture(str(path))
+    try:
+        fps = cap.get(cv2.CAP_PROP_FPS)
+    finally:
+        cap.release()
+    return round(float(fps), 6) if fps and fps > 0 else None
+
+
+def write_pattern_manifest(folder: Path, opts: ManifestOptions) -> tuple[Manifest, Path]:
+    """Build and write recordings.json (in opts.out or the folder); refuses to replace one
+    unless opts.force."""
+    home = Path(opts.out) if opts.out is not None else Path(folder)
+    home.mkdir(parents=True, exist_ok=True)
+    target = home / MANIFEST_NAME
+    if target.exists() and not opts.force:
+        raise VtsError("already exists (use --force to replace it)", target)
+    m = build_pattern_manifest(Path(folder), opts)
+    return m, save_manifest(home, m)
+
+
+__all__ = ["ManifestOptions", "build_pattern_manifest", "compile_pattern", "match_files",
+           "media_kind", "read_circles", "write_pattern_manifest"]
