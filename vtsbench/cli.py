@@ -164,6 +164,79 @@ def preview(
 # -- collect: registered below --
 
 
+@app.command()
+def collect(
+    out: Annotated[Path, typer.Argument(help="Recordings folder to create (or add to, --append).")],
+    source: Annotated[str, typer.Option(help="Camera index (0, 1, ...) or video file.")],
+    session: Annotated[str, typer.Option(help="Session id (one sitting of one sensor).")] = "s0",
+    sensor: Annotated[str | None, typer.Option(
+        help="Sensor id (new session; default 'unknown').")] = None,
+    mm_per_px: Annotated[float | None, typer.Option(help="Scale, mm per pixel.")] = None,
+    fps: Annotated[float | None, typer.Option(
+        help="Frame rate (default: as the source reports it).")] = None,
+    mount_rotation: Annotated[float | None, typer.Option(
+        help="Mount: rotate stage motion CCW by this many degrees into the image (default 0).")
+    ] = None,
+    mount_mirror: Annotated[bool | None, typer.Option(
+        "--mount-mirror/--no-mount-mirror",
+        help="Mount: mirror stage x before rotating (default off).")] = None,
+    background_frames: Annotated[int, typer.Option(
+        min=0, help="Leading no-contact frames: the background is their median; never cut "
+                    "into entries.")] = 10,
+    background: Annotated[Path | None, typer.Option(
+        help="Background image file for a new session, instead of the median.")] = None,
+    kind: Annotated[str, typer.Option(help="sequence, static or press.")] = "sequence",
+    window: Annotated[int, typer.Option(min=2, help="Frames per sequence window.")] = 8,
+    stride: Annotated[int | None, typer.Option(
+        min=1, help="Step between windows (default: --window).")] = None,
+    every: Annotated[int, typer.Option(
+        min=1, help="static: keep every K-th frame; press: at most one frame per K.")] = 10,
+    ball_radius: Annotated[float | None, typer.Option(
+        help="Indenter ball radius in mm (required for --kind press).")] = None,
+    contact_level: Annotated[float, typer.Option(
+        help="press: gray levels of (blurred) change that count as contact.")] = 10.0,
+    contact_area: Annotated[float, typer.Option(
+        help="press: fraction of pixels in contact that makes a press frame.")] = 0.001,
+    object_name: Annotated[str | None, typer.Option("--object", help="Object label.")] = None,
+    take: Annotated[str | None, typer.Option(
+        help="Take name (default: next free number).")] = None,
+    max_frames: Annotated[int | None, typer.Option(
+        min=1, help="Stop after this many frames (background included).")] = None,
+    motion_log: Annotated[Path | None, typer.Option(
+        help="CSV with columns t_s,x_mm,y_mm,z_mm (stage motion; z into the gel).")] = None,
+    log_offset: Annotated[float, typer.Option(
+        help="Log time of frame 0 in seconds: frame i is at i / fps + offset.")] = 0.0,
+    slip_threshold_mm: Annotated[float | None, typer.Option(
+        help="Lateral motion (mm) over a window that makes a slip (default 0.05).")] = None,
+    press_threshold_mm: Annotated[float | None, typer.Option(
+        help="Indentation increase (mm) over a window that makes a press (default 0.05).")
+    ] = None,
+    append: Annotated[bool, typer.Option(help="Add a session or take to an existing OUT.")] = False,
+    overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
+    quiet: Annotated[bool, typer.Option(help="No progress bar.")] = False,
+) -> None:
+    """Record a camera or a video file into a recordings folder, labelled from a motion log.
+
+    Example: [bold]vtsbench collect rec --source take.mp4 --sensor gsmini --motion-log log.csv[/]
+    """
+    from .collect import CollectOptions
+    from .collect import collect as run_collect
+
+    opts = CollectOptions(
+        source=source, session=session, sensor=sensor, mm_per_px=mm_per_px, fps=fps,
+        mount_rotation_deg=mount_rotation, mount_mirror=mount_mirror,
+        background_frames=background_frames, background=background, kind=kind, window=window,
+        stride=stride, every=every, ball_radius_mm=ball_radius, contact_level=contact_level,
+        contact_area=contact_area, object=object_name, take=take, max_frames=max_frames,
+        motion_log=motion_log, log_offset_s=log_offset, slip_threshold_mm=slip_threshold_mm,
+        press_threshold_mm=press_threshold_mm, append=append, overwrite=overwrite)
+    res = _run(run_collect, out, opts, progress=not quiet)
+    if res.stopped:
+        typer.echo("stopped by Ctrl-C: kept the entries completed so far", err=True)
+    typer.echo(f"wrote {len(res.entries)} {kind} entries to {out} (session {res.session}, "
+               f"take {res.take}; {res.frames_read} frames read)")
+
+
 def main() -> None:
     """Console entry point."""
     app(prog_name="vtsbench")
