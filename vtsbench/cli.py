@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -51,10 +51,11 @@ def _parse_size(text: str) -> tuple[int, int]:
 @app.command()
 def simulate(
     out: Annotated[Path, typer.Argument(help="Recordings folder to create.")],
-    seed: Annotated[int, typer.Option(help="Random seed; the same seed writes identical files.")] = 0,
+    seed: Annotated[int, typer.Option(
+        help="Random seed; the same seed writes identical files.")] = 0,
     static: Annotated[int, typer.Option("--static", min=0, help="Static frames.")] = 30,
-    sequences: Annotated[int, typer.Option("--sequences", min=0,
-                                           help="Sequences (static, press and slip, balanced).")] = 30,
+    sequences: Annotated[int, typer.Option(
+        "--sequences", min=0, help="Sequences (static, press and slip, balanced).")] = 30,
     presses: Annotated[int, typer.Option("--presses", min=0,
                                          help="Calibration presses of a 3 mm-radius sphere.")] = 20,
     objects: Annotated[int, typer.Option("--objects", min=1, max=15,
@@ -62,7 +63,8 @@ def simulate(
     size: Annotated[str, typer.Option(help="Frame size HxW.")] = "480x640",
     frames: Annotated[int, typer.Option(min=2, help="Frames per sequence.")] = 8,
     sessions: Annotated[int, typer.Option(min=1, help="Sessions (backgrounds, noise draws).")] = 3,
-    mm_per_px: Annotated[float, typer.Option(min=1e-4, help="Scale of the sensor, mm per pixel.")] = 0.03,
+    mm_per_px: Annotated[float, typer.Option(
+        min=1e-4, help="Scale of the sensor, mm per pixel.")] = 0.03,
     workers: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 1,
     overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
     quiet: Annotated[bool, typer.Option(help="No progress bar.")] = False,
@@ -114,35 +116,40 @@ def manifest(
         help="File-name pattern relative to FOLDER, e.g. '{object}_{take}.mov'. Fields: object, "
              "take, session, state, direction; '{name:d}' matches digits only; fields match "
              "greedily from the left; '/' matches sub-folders.")],
-    kind: Annotated[Optional[str], typer.Option(
+    kind: Annotated[str | None, typer.Option(
         help="static, sequence or press (default: sequence for videos and image folders, "
              "static for images).")] = None,
     sensor: Annotated[str, typer.Option(help="Sensor id.")] = "unknown",
-    session: Annotated[str, typer.Option(help="Session id when the pattern has no {session}.")] = "s0",
-    mm_per_px: Annotated[Optional[float], typer.Option(help="mm per pixel, if known.")] = None,
-    fps: Annotated[Optional[float], typer.Option(help="Frame rate (default: read from videos).")] = None,
-    background: Annotated[Optional[str], typer.Option(
+    session: Annotated[str, typer.Option(
+        help="Session id when the pattern has no {session}.")] = "s0",
+    mm_per_px: Annotated[float | None, typer.Option(help="mm per pixel, if known.")] = None,
+    fps: Annotated[float | None, typer.Option(
+        help="Frame rate (default: read from videos).")] = None,
+    background: Annotated[str | None, typer.Option(
         help="No-contact frame, relative to FOLDER.")] = None,
-    ball_radius_mm: Annotated[Optional[float], typer.Option(
+    ball_radius_mm: Annotated[float | None, typer.Option(
         help="Ball radius in mm for presses.")] = None,
-    circles: Annotated[Optional[Path], typer.Option(
+    circles: Annotated[Path | None, typer.Option(
         help="CSV of press circles: a file column (file|img_names|image|name) and x|center_x, "
              "y|center_y, r|radius in pixels.")] = None,
-    window: Annotated[Optional[int], typer.Option(
+    window: Annotated[int | None, typer.Option(
         min=1, help="Cut videos and folders into sequences of this many frames.")] = None,
-    stride: Annotated[Optional[int], typer.Option(min=1, help="Step between windows.")] = None,
+    stride: Annotated[int | None, typer.Option(min=1, help="Step between windows.")] = None,
     force: Annotated[bool, typer.Option(help="Replace an existing recordings.json.")] = False,
+    out: Annotated[Path | None, typer.Option(
+        help="Write recordings.json into this folder instead (for read-only data); paths in it "
+             "point back to FOLDER.")] = None,
 ) -> None:
     """Write recordings.json for a folder of existing files, matched by a file-name pattern.
 
-    Example: [bold]vtsbench manifest octopi_videos --pattern '{object}_{take}.mov' --sensor gsmini[/]
+    Example: [bold]vtsbench manifest videos --pattern '{object}_{take}.mov' --sensor gsmini[/]
     """
     from .recordings.importer import ManifestOptions, write_pattern_manifest
 
     opts = ManifestOptions(pattern=pattern, kind=kind, sensor=sensor, session=session,
                            mm_per_px=mm_per_px, fps=fps, background=background,
                            ball_radius_mm=ball_radius_mm, circles=circles, window=window,
-                           stride=stride, force=force)
+                           stride=stride, force=force, out=out)
     m, path = _run(write_pattern_manifest, folder, opts)
     typer.echo(f"wrote {path}: {len(m.entries)} entries in {len(m.sessions)} session(s)")
 
@@ -151,7 +158,7 @@ def manifest(
 def preview(
     folder: Annotated[Path, typer.Argument(help="Recordings folder.")],
     out: Annotated[Path, typer.Option("--out", help="PNG to write.")] = Path("preview.png"),
-    n: Annotated[int, typer.Option(min=1, help="Entries to show.")] = 12,
+    n: Annotated[int, typer.Option("-n", "--n", min=1, help="Entries to show.")] = 12,
     seed: Annotated[int, typer.Option(help="Which entries to pick (spread over kinds).")] = 0,
 ) -> None:
     """Write a contact sheet: frames with their labels and, for simulated data, the true depth."""
