@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from vtsbench import collect as collect_mod
 from vtsbench.collect import CollectOptions, collect, window_labels
 from vtsbench.errors import VtsError
 from vtsbench.labels import Thresholds
@@ -347,13 +346,13 @@ def test_bad_sources(media_dir: Path, tmp_path: Path, monkeypatch: pytest.Monkey
         run(tmp_path / "rec", opts(media_dir, source="57"))
     assert not (tmp_path / "rec").exists()
 
-    real_init = collect_mod.Capture.__init__
+    real_init = media.Capture.__init__
 
     def no_fps(self, source: str) -> None:
         real_init(self, source)
         self.fps = None
 
-    monkeypatch.setattr(collect_mod.Capture, "__init__", no_fps)
+    monkeypatch.setattr(media.Capture, "__init__", no_fps)
     with pytest.raises(VtsError, match=r"frame rate unknown.*--fps"):
         run(tmp_path / "rec", opts(media_dir))
     assert run(tmp_path / "rec", opts(media_dir, fps=FPS)).manifest.sessions[0].fps == FPS

@@ -117,62 +117,6 @@ def _cv2():
     return cv2
 
 
-def _bgr_to_rgb(frame: np.ndarray) -> np.ndarray:
-    """OpenCV decodes BGR; every frame the capture hands out is RGB (converted here, once)."""
-    return _cv2().cvtColor(frame, _cv2().COLOR_BGR2RGB)
-
-
-class Capture:
-    """A camera (by index) or a video file opened through OpenCV, read frame by frame as RGB."""
-
-    def __init__(self, source: str) -> None:
-        cv2 = _cv2()
-        text = source.strip()
-        self.is_camera = text.isdigit()
-        self.n_frames: int | None = None
-        if self.is_camera:
-            self.name = f"camera {int(text)}"
-            level = cv2.utils.logging.getLogLevel()
-            cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
-            try:
-                cap = cv2.VideoCapture(int(text))
-            finally:
-                cv2.utils.logging.setLogLevel(level)
-            if not cap.isOpened():
-                raise VtsError("cannot open camera (no device with this index, or it is busy)",
-                               self.name)
-        else:
-            path = Path(text)
-            self.name = str(path)
-            info = media.probe(path)  # missing, unsupported type, or undecodable: one-line errors
-            if info.kind != "video":
-                raise VtsError(f"not a video file but an {info.kind} (--source takes a camera "
-                               "index or a video file)", path)
-            cap = cv2.VideoCapture(str(path))
-            if not cap.isOpened():
-                raise VtsError("cannot open video (unknown codec or corrupt file)", path)
-            self.n_frames = info.n_frames if info.n_frames > 0 else None
-        fps = cap.get(cv2.CAP_PROP_FPS)
-        self.fps: float | None = float(fps) if math.isfinite(fps) and 0 < fps < 1e4 else None
-        self._cap = cap
-
-    def read(self) -> np.ndarray | None:
-        """The next frame as RGB uint8 (H, W, 3), or None at the end of the stream."""
-        ok, frame = self._cap.read()
-        if not ok or frame is None:
-            return None
-        return _bgr_to_rgb(frame)
-
-    def close(self) -> None:
-        self._cap.release()
-
-    def __enter__(self) -> Capture:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-
 # -- labels and contact ----------------------------------------------------------------------
 
 
@@ -346,7 +290,7 @@ def _progress(enabled: bool):
                     transient=False)
 
 
-def _record(cap: Capture, take_dir: Path, plan: _Plan, progress: bool) -> _Recording:
+def _record(cap: media.Capture, take_dir: Path, plan: _Plan, progress: bool) -> _Recording:
     """Read the stream, write frames into take_dir (a staging folder) and build the entries."""
     o = plan.opts
     rec = _Recording(background=plan.background, resolution=plan.resolution)
@@ -461,8 +405,8 @@ def _write_png_atomic(path: Path, rgb: np.ndarray) -> None:
 
 
 @contextlib.contextmanager
-def _opened(source: str) -> Iterator[Capture]:
-    cap = Capture(source)
+def _opened(source: str) -> Iterator[media.Capture]:
+    cap = media.Capture(source)
     try:
         yield cap
     finally:

@@ -6,6 +6,7 @@ place where the channel order is converted, so it cannot be converted twice.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -130,6 +131,57 @@ def _read_video(path: Path, start: int, stop: int | None) -> np.ndarray:
         raise VtsError(f"frame range [{start}, {stop}) past the end of the video "
                        f"({start + len(frames)} frames decoded)", path)
     return np.stack(frames)
+
+
+class Capture:
+    """A camera (by index) or a video file opened through OpenCV, read frame by frame as RGB."""
+
+    def __init__(self, source: str) -> None:
+        cv2 = _cv2()
+        text = source.strip()
+        self.is_camera = text.isdigit()
+        self.n_frames: int | None = None
+        if self.is_camera:
+            self.name = f"camera {int(text)}"
+            level = cv2.utils.logging.getLogLevel()
+            cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+            try:
+                cap = cv2.VideoCapture(int(text))
+            finally:
+                cv2.utils.logging.setLogLevel(level)
+            if not cap.isOpened():
+                raise VtsError("cannot open camera (no device with this index, or it is busy)",
+                               self.name)
+        else:
+            path = Path(text)
+            self.name = str(path)
+            info = probe(path)  # missing, unsupported type, or undecodable: one-line errors
+            if info.kind != "video":
+                raise VtsError(f"not a video file but an {info.kind} (--source takes a camera "
+                               "index or a video file)", path)
+            cap = cv2.VideoCapture(str(path))
+            if not cap.isOpened():
+                raise VtsError("cannot open video (unknown codec or corrupt file)", path)
+            self.n_frames = info.n_frames if info.n_frames > 0 else None
+        fps = cap.get(cv2.CAP_PROP_FPS)
+        self.fps: float | None = float(fps) if math.isfinite(fps) and 0 < fps < 1e4 else None
+        self._cap = cap
+
+    def read(self) -> np.ndarray | None:
+        """The next frame as RGB uint8 (H, W, 3), or None at the end of the stream."""
+        ok, frame = self._cap.read()
+        if not ok or frame is None:
+            return None
+        return _cv2().cvtColor(frame, _cv2().COLOR_BGR2RGB)
+
+    def close(self) -> None:
+        self._cap.release()
+
+    def __enter__(self) -> Capture:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def read_frame(path: Path, index: int = 0) -> np.ndarray:
