@@ -1,0 +1,152 @@
+"""Planning: which entry gets which object, state and session, and each entry's random scene.
+
+Every entry draws from its own generator, seeded by (seed, kind, number) and nothing else, so
+an entry's files do not depend on which worker renders it or in which order.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..labels import STATES
+from .motion import Motion, place_path, sample_motion, sequence_scene
+from .objects import BALL, BALL_RADIUS_MM, OBJECTS, random_instance
+from .scene import Effects, Scene
+
+KIND_CODES = {"static": 0, "sequence": 1, "press": 2}
+_SESSION_CODE = 3
+_PLAN_CODE = 4
+_PREFIX = {"static": "static", "sequence": "seq", "press": "press"}
+
+#: Calibration presses: depth range (mm) and clearance (mm) between the contact and the border.
+PRESS_DEPTH_MM = (0.1, 1.2)
+PRESS_CLEARANCE_MM = 0.15
+#: Smallest contact radius (px) of the shallowest calibration press worth recording.
+MIN_PRESS_RADIUS_PX = 4.0
+MIN_SIZE_PX = 32
+
+
+@dataclass(frozen=True)
+class EntryPlan:
+    """What one entry is: kind, 1-based number within the kind, session, object, state."""
+
+    kind: str
+    number: int
+    session: int
+    object: str
+    state: str | None = None
+
+    @property
+    def id(self) -> str:
+        return f"{_PREFIX[self.kind]}-{self.number:05d}"
+
+
+def entry_rng(seed: int, kind: str, number: int) -> np.random.Generator:
+    """The generator of one entry, independent of every other entry."""
+    return np.random.default_rng(np.random.SeedSequence([seed, KIND_CODES[kind], number]))
+
+
+def session_rng(seed: int, session: int) -> np.random.Generator:
+    """The generator of one session's capture settings and background frame."""
+    return np.random.default_rng(np.random.SeedSequence([seed, _SESSION_CODE, session]))
+
+
+def _balanced(rng: np.random.Generator, n: int, k: int) -> list[int]:
+    """n values cycling over 0..k-1, shuffled: balanced counts, no pattern tied to position."""
+    values = [i % k for i in range(n)]
+    return [values[i] for i in rng.permutation(n)] if n else []
+
+
+def make_plans(seed: int, n_static: int, n_sequences: int, n_presses: int, n_objects: int,
+               n_sessions: int) -> list[EntryPlan]:
+    """All entries in manifest order: static frames, sequences, presses.
+
+    Objects and sessions are balanced and shuffled independently per kind (so neither is tied
+    to the other or to the sequence state); sequence states cycle static, press, slip.
+    """
+    plans: list[EntryPlan] = []
+    for kind, n in (("static", n_static), ("sequence", n_sequences), ("press", n_presses)):
+        rng = np.random.default_rng(np.random.SeedSequence([seed, _PLAN_CODE, KIND_CODES[kind]]))
+        objects = _balanced(rng, n, n_objects)
+        sessions = _balanced(rng, n, n_sessions)
+        for i in range(n):
+            name = BALL.name if kind == "press" else OBJECTS[objects[i]].name
+            state = STATES[i % 3] if kind == "sequence" else None
+            plans.append(EntryPlan(kind, i + 1, sessions[i], name, state))
+    return plans
+
+
+def ball_contact_radius_mm(depth_mm: float) -> float:
+    """Radius of the rigid overlap of the calibration ball at a depth."""
+    return math.sqrt(max(2.0 * BALL_RADIUS_MM * depth_mm - depth_mm * depth_mm, 0.0))
+
+
+def max_press_depth_mm(size: tuple[int, int], mm_per_px: float) -> float:
+    """Deepest calibration press whose contact stays inside the frame (with clearance)."""
+    a = min(size) * mm_per_px / 2.0 - PRESS_CLEARANCE_MM
+    if a >= BALL_RADIUS_MM:
+        return PRESS_DEPTH_MM[1]
+    if a <= 0.0:
+        return 0.0
+    return min(PRESS_DEPTH_MM[1], BALL_RADIUS_MM - math.sqrt(BALL_RADIUS_MM**2 - a * a))
+
+
+def size_problem(size: tuple[int, int], mm_per_px: float, presses: bool) -> str | None:
+    """Why a frame size and scale cannot be simulated, or None."""
+    height, width = size
+    if height < MIN_SIZE_PX or width < MIN_SIZE_PX:
+        return f"frame size {height}x{width} is too small (at least {MIN_SIZE_PX}x{MIN_SIZE_PX})"
+    if not mm_per_px > 0.0 or not math.isfinite(mm_per_px):
+        return f"mm_per_px must be a positive number, got {mm_per_px}"
+    if presses:
+        r_px = ball_contact_radius_mm(PRESS_DEPTH_MM[0]) / mm_per_px
+        if r_px < MIN_PRESS_RADIUS_PX:
+            return (f"{mm_per_px} mm/px is too coarse for calibration presses: a {BALL_RADIUS_MM}"
+                    f" mm ball pressed {PRESS_DEPTH_MM[0]} mm touches only {r_px:.1f} px "
+                    f"(at least {MIN_PRESS_RADIUS_PX:g}); use a smaller --mm-per-px or --presses 0")
+        if max_press_depth_mm(size, mm_per_px) < PRESS_DEPTH_MM[0]:
+            need = 2 * (ball_contact_radius_mm(PRESS_DEPTH_MM[0]) + PRESS_CLEARANCE_MM)
+            return (f"a {height}x{width} frame at {mm_per_px} mm/px ({height * mm_per_px:.2f} x "
+                    f"{width * mm_per_px:.2f} mm) is too small for a {BALL_RADIUS_MM} mm ball "
+                    f"pressed {PRESS_DEPTH_MM[0]} mm (needs {need:.2f} mm); use a larger --size "
+                    "or --mm-per-px, or --presses 0")
+    return None
+
+
+def static_scene(plan: EntryPlan, rng: np.random.Generator, size: tuple[int, int],
+                 mm_per_px: float) -> Scene:
+    """A single frame of a held object at a random pose, place and depth."""
+    from .objects import by_name
+
+    cls = by_name(plan.object)
+    obj = random_instance(cls, rng)
+    depth = float(rng.uniform(*cls.depth_mm))
+    center = place_path(Motion(0.0, 0.0, depth, depth), rng, size, mm_per_px)
+    return Scene(obj, (center,), (depth,), size, mm_per_px,
+                 Effects(texture=cls.texture is not None))
+
+
+def sequence_plan_scene(plan: EntryPlan, rng: np.random.Generator, size: tuple[int, int],
+                        mm_per_px: float, n_frames: int) -> tuple[Scene, Motion]:
+    """A sequence of the plan's intended state, and the motion that made it."""
+    from .objects import by_name
+
+    cls = by_name(plan.object)
+    obj = random_instance(cls, rng)
+    motion = sample_motion(plan.state or "static", rng, cls.depth_mm)
+    start = place_path(motion, rng, size, mm_per_px)
+    return sequence_scene(obj, motion, start, n_frames, size, mm_per_px), motion
+
+
+def press_scene(rng: np.random.Generator, size: tuple[int, int], mm_per_px: float) -> Scene:
+    """A calibration press: the smooth ball at a random depth, its contact inside the frame."""
+    height, width = size
+    depth = float(rng.uniform(PRESS_DEPTH_MM[0], max_press_depth_mm(size, mm_per_px)))
+    reach = (ball_contact_radius_mm(depth) + PRESS_CLEARANCE_MM) / mm_per_px
+    cx = float(rng.uniform(reach, width - 1 - reach))
+    cy = float(rng.uniform(reach, height - 1 - reach))
+    obj = random_instance(BALL, rng)
+    return Scene(obj, ((cx, cy),), (depth,), size, mm_per_px, Effects(texture=False))
