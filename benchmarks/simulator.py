@@ -117,6 +117,7 @@ def main() -> None:
         for kind in KINDS:
             scenes = make_scenes(kind, args.scenes, size, args.mm_per_px, args.frames)
             forced = [s.with_effects(Effects.everything()) for s in scenes]
+            render(scenes[0], capture, np.random.default_rng(0))  # warm-up (lazy imports)
             minimal = timed(scenes, lambda s, rng: render(s, capture, rng), args.repeats)
             full = timed(forced, lambda s, rng: render(s, capture, rng), args.repeats)
             written = timed(scenes, write, args.repeats)

@@ -124,3 +124,18 @@ def test_no_presses_allows_a_small_frame(tmp_path: Path) -> None:
     m = simulate(tmp_path / "x", seed=0, n_static=1, n_sequences=0, n_presses=0, size=(32, 40),
                  mm_per_px=0.03, n_sessions=1)
     assert len(m.entries) == 1 and not (tmp_path / "x" / "presses").exists()
+
+
+def test_workers_start_cleanly_after_the_parent_used_opencv_threads(tmp_path: Path) -> None:
+    # Forked workers could inherit OpenCV's thread-pool locks mid-use and hang; they are spawned.
+    import subprocess
+    import sys
+
+    code = ("import cv2, numpy as np; cv2.setNumThreads(2); "
+            "a = np.ones((480, 640, 3), np.float32); "
+            "[cv2.GaussianBlur(a, (31, 31), 5) for _ in range(20)]; "
+            "from vtsbench.sim.simulate import simulate; "
+            f"simulate({str(tmp_path / 'o')!r}, seed=0, n_static=2, n_sequences=2, n_presses=2, "
+            "size=(96, 128), mm_per_px=0.1, workers=2, frames=2)")
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
+    assert (tmp_path / "o" / "recordings.json").is_file()

@@ -212,3 +212,24 @@ def test_a_moving_scene_needs_the_motion_effect() -> None:
     obj = random_instance(BALL, np.random.default_rng(0))
     with pytest.raises(ValueError, match="motion"):
         Scene(obj, ((10.0, 10.0), (12.0, 10.0)), (0.2, 0.2), SIZE, MPP, Effects(motion=False))
+
+
+def test_spread_off_leaves_no_skirt() -> None:
+    on = render(scene_of(BALL.name, 0.4, Effects(texture=False)), rng=np.random.default_rng(0))
+    off = render(scene_of(BALL.name, 0.4, Effects(texture=False, spread=False)),
+                 rng=np.random.default_rng(0))
+    a = ball_contact_radius_mm(0.4) / MPP
+    yy, xx = np.mgrid[0:SIZE[0], 0:SIZE[1]]
+    ring = np.hypot(xx - SIZE[1] / 2, yy - SIZE[0] / 2) > a + 2
+    assert (off.depth_mm[0][ring] == 0).all()
+    assert on.depth_mm[0][ring].max() > 0.01  # the skirt
+    assert on.contact.sum() < off.contact.sum()  # the skirt term takes the contact's rim
+
+
+def test_ideal_optics_effects_render_a_uniform_background() -> None:
+    s = scene_of(BALL.name, 0.2, Effects(texture=False, noise=False, vignetting=False,
+                                         nonuniform_light=False))
+    r = render(s)
+    far = r.depth_mm[0] == 0
+    vals = r.frames[0][far].reshape(-1, 3)
+    assert (vals == vals[0]).all()

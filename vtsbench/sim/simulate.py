@@ -92,7 +92,7 @@ def run_job(job: Job) -> Entry:
     rendered = render(scene, job.capture, rng)
     truth = f"truth/{plan.id}.npz"
     write_truth(root / truth, rendered)
-    depth = _round(scene.depths_mm[-1])
+    depth = float(scene.depths_mm[-1])
     contact_px = _centroid(rendered.contact[-1])
     obj = scene.obj
     meta = {"group": obj.cls.group, "rotation_deg": _round(obj.rotation_deg, 4),
@@ -102,13 +102,14 @@ def run_job(job: Job) -> Entry:
         assert motion is not None
         folder = f"sequences/{plan.id}"
         (root / folder).mkdir()
+        digits = max(3, len(str(job.frames - 1)))
         for t, frame in enumerate(rendered.frames):
-            write_png(root / folder / f"{t:03d}.png", frame)
+            write_png(root / folder / f"{t:0{digits}d}.png", frame)
         lab = motion.label()
         meta["intended_state"] = plan.state
-        meta["depth0_mm"] = _round(motion.depth0_mm)
+        meta["depth0_mm"] = float(motion.depth0_mm)
         labels = Labels(state=lab.state, direction=lab.direction,
-                        motion_mm=(_round(motion.dx_mm, 9), _round(motion.dy_mm, 9)),
+                        motion_mm=(float(motion.dx_mm), float(motion.dy_mm)),
                         press_depth_mm=depth, contact_px=contact_px)
         return Entry(plan.id, "sequence", job.session_id, Source(folder, start=0, stop=job.frames),
                      object=plan.object, labels=labels, truth=truth, meta=meta)
@@ -176,9 +177,14 @@ def _run_jobs(jobs: list[Job], workers: int, progress: bool) -> list[Entry]:
             finally:
                 cv2.setNumThreads(threads)
         else:
+            import multiprocessing
             from concurrent.futures import ProcessPoolExecutor, as_completed
 
-            with ProcessPoolExecutor(max_workers=workers, initializer=_set_threads) as pool:
+            # Spawned, not forked: a fork copies the parent's OpenCV and progress-bar threads'
+            # locks in whatever state they are, and the children can deadlock on them.
+            ctx = multiprocessing.get_context("spawn")
+            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
+                                     initializer=_set_threads) as pool:
                 futures = {pool.submit(run_job, job): i for i, job in enumerate(jobs)}
                 try:
                     for fut in as_completed(futures):
