@@ -40,6 +40,7 @@ def margin_px(mm_per_px: float, spread: bool = True) -> int:
 
 
 def _blur(a: np.ndarray, sigma_px: float) -> np.ndarray:
+    """Gaussian blur with zero outside the box (a copy when the blur is sub-pixel)."""
     import cv2
 
     if sigma_px < 0.25:  # narrower than a pixel: a no-op at this sampling

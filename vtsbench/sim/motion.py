@@ -73,6 +73,7 @@ def slip(angle_deg: float, distance_mm: float, depth_mm: float) -> Motion:
 
 
 def _log_uniform(rng: np.random.Generator, lo: float, hi: float) -> float:
+    """A log-uniform draw: as many small motions as large ones, per octave."""
     return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
 
 

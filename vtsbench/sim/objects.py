@@ -49,10 +49,12 @@ class ObjectInstance:
 
     @property
     def radius_mm(self) -> float:
+        """Footprint radius of this instance (mm)."""
         return self.cls.radius_mm * self.scale
 
     @property
     def texture_bound_mm(self) -> float:
+        """Bound on |texture| of this instance (mm); 0 without texture."""
         return self.cls.texture_amp_mm * self.scale if self.cls.texture is not None else 0.0
 
     def local(self, x_mm: np.ndarray, y_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -118,57 +120,66 @@ def _rounded_box(u: np.ndarray, v: np.ndarray, hu: float, hv: float, rho: float)
 # -- geometric indenters ---------------------------------------------------------------------
 
 def _sphere(u, v, t):
+    """Spherical cap of radius 4 mm."""
     return _cap(u * u + v * v, 4.0, 4.0)
 
 
 def _sphere_tex(u, v, t):
+    """Isotropic bead-blast roughness."""
     return _waves(u, v, t, 6, (0.12, 0.35), 0.004)
 
 
 def _cylinder(u, v, t):
-    # A lying rod (capsule) of radius 1.5 mm and length 9 mm along u.
+    """A lying rod (capsule) of radius 1.5 mm and length 9 mm along u."""
     e = np.maximum(np.abs(u) - 3.0, 0.0)
     return _cap(e * e + v * v, 1.5, 1.5)
 
 
 def _cylinder_tex(u, v, t):
+    """Circumferential lathe marks across the rod, plus faint roughness."""
     lam = 0.18 + 0.1 * float(t[1])
     return np.cos(u * np.float32(2 * math.pi / lam) + np.float32(2 * math.pi * t[0])) * \
         np.float32(0.003) + _waves(u, v, t, 3, (0.1, 0.3), 0.001, offset=6)
 
 
 def _cone(u, v, t):
+    """Cone of slope 0.7 with a hyperbolically rounded tip."""
     r = np.sqrt(u * u + v * v)
     return np.where(r < 4.0, -0.7 * (np.sqrt(r * r + 0.16) - 0.4), -BIG)
 
 
 def _cone_tex(u, v, t):
+    """Concentric machining rings."""
     return _rings(u, v, t, 0.2, 0.003)
 
 
 def _cube(u, v, t):
+    """Flat 5 x 5 mm face with rounded edges."""
     return _rounded_box(u, v, 2.5, 2.5, 0.4)
 
 
 def _cube_tex(u, v, t):
+    """Straight milling marks plus faint roughness."""
     lam = 0.22 + 0.1 * float(t[1])
     return np.cos(v * np.float32(2 * math.pi / lam) + np.float32(2 * math.pi * t[0])) * \
         np.float32(0.0025) + _waves(u, v, t, 3, (0.1, 0.3), 0.0015, offset=6)
 
 
 def _ridge(u, v, t):
+    """Triangular prism along u with a rounded crest."""
     h = -0.9 * (np.sqrt(v * v + 0.0225) - 0.15)
     return np.where((np.abs(u) < 4.5) & (np.abs(v) < 2.0), h, -BIG)
 
 
 def _ridge_tex(u, v, t):
-    # Scratches along the ridge: waves whose crests run along u.
+    """Scratches along the ridge: waves whose crests run along u."""
     return _waves(u, v, t, 5, (0.08, 0.4), 0.004, angle_deg=90.0, spread_deg=4.0)
 
 
 # -- hardware tools --------------------------------------------------------------------------
 
 def _hex_nut(u, v, t):
+    """Hexagonal nut face: bore, bore chamfer and conical corner chamfer."""
     r = np.sqrt(u * u + v * v)
     hd = np.maximum(np.abs(u), np.maximum(np.abs(0.5 * u + 0.8660254 * v),
                                           np.abs(0.5 * u - 0.8660254 * v)))
@@ -177,11 +188,12 @@ def _hex_nut(u, v, t):
 
 
 def _hex_nut_tex(u, v, t):
+    """Turning rings plus faint roughness."""
     return _rings(u, v, t, 0.15, 0.0025) + _waves(u, v, t, 3, (0.1, 0.3), 0.001, offset=3)
 
 
 def _screw(u, v, t):
-    # Threaded rod along u: major radius 2 mm, pitch 0.8 mm, thread depth 0.35 mm, lead angle.
+    """Threaded rod along u: major radius 2 mm, pitch 0.8 mm, depth 0.35 mm, lead angle."""
     w = (u - 0.06 * v) / 0.8
     tri = np.abs(2.0 * (w - np.floor(w)) - 1.0)
     radius = 1.65 + 0.35 * np.clip((tri - 0.1) / 0.8, 0.0, 1.0)
@@ -190,10 +202,12 @@ def _screw(u, v, t):
 
 
 def _screw_tex(u, v, t):
+    """Fine isotropic roughness."""
     return _waves(u, v, t, 4, (0.08, 0.25), 0.0015)
 
 
 def _gear(u, v, t):
+    """Spur gear face: trapezoid-ish teeth, bevelled rim, recessed web, bore."""
     r = np.sqrt(u * u + v * v)
     teeth = 12 + int(t[40] * 7)
     tooth = np.clip(1.8 * (0.5 + 0.5 * np.cos(teeth * np.arctan2(v, u) + 6.2832 * t[41])) - 0.4,
@@ -205,11 +219,12 @@ def _gear(u, v, t):
 
 
 def _gear_tex(u, v, t):
+    """Turning rings plus faint roughness."""
     return _rings(u, v, t, 0.12, 0.002) + _waves(u, v, t, 3, (0.1, 0.3), 0.001, offset=3)
 
 
 def _key(u, v, t):
-    # Blade along -u with five V cuts on the +v edge, a keyway groove, a bow with a hole at +u.
+    """Blade along -u with five V cuts on the +v edge, a keyway groove, a bow with a hole."""
     cut = np.zeros_like(u)
     for k in range(5):
         depth = 0.15 + 0.45 * float(t[42 + k])
@@ -222,13 +237,14 @@ def _key(u, v, t):
 
 
 def _key_tex(u, v, t):
+    """Brushed lines along the blade."""
     return _waves(u, v, t, 5, (0.06, 0.3), 0.002, angle_deg=90.0, spread_deg=3.0)
 
 
 # -- electronic connectors -------------------------------------------------------------------
 
 def _usb_plug(u, v, t):
-    # USB-A plug face: a 12 x 4.5 mm shell with a rounded 0.3 mm wall and a recessed tongue.
+    """USB-A plug face: a 12 x 4.5 mm shell with a rounded 0.3 mm wall and a recessed tongue."""
     d_out = np.maximum(np.abs(u) - 6.0, np.abs(v) - 2.25)
     c = d_out + 0.15
     rim = np.sqrt(np.maximum(0.0225 - c * c, 0.0)) - 0.15
@@ -240,6 +256,7 @@ def _usb_plug(u, v, t):
 
 
 def _usb_tex(u, v, t):
+    """Stamped-metal grain."""
     return _waves(u, v, t, 5, (0.08, 0.3), 0.002)
 
 
@@ -248,7 +265,7 @@ _PIN_V = (-1.27, 1.27)
 
 
 def _pin_header(u, v, t):
-    # 2 x 4 square pins (0.64 mm, pitch 2.54 mm) with pyramidal tips; tiny height differences.
+    """2 x 4 square pins (0.64 mm, pitch 2.54 mm) with pyramidal tips; tiny height differences."""
     iu = np.clip(np.round((u + 3.81) / 2.54), 0, 3)
     iv = np.clip(np.round((v + 1.27) / 2.54), 0, 1)
     a = u - (-3.81 + 2.54 * iu)
@@ -261,11 +278,12 @@ def _pin_header(u, v, t):
 
 
 def _pin_tex(u, v, t):
+    """Plating roughness."""
     return _waves(u, v, t, 3, (0.08, 0.2), 0.0015)
 
 
 def _dip_chip(u, v, t):
-    # DIP-8 body 9.6 x 6.4 mm: rounded edges, a notch at one end, the pin-1 dimple.
+    """DIP-8 body 9.6 x 6.4 mm: rounded edges, a notch at one end, the pin-1 dimple."""
     h = _rounded_box(u, v, 4.8, 3.2, 0.35)
     notch = (u + 4.8) ** 2 + v * v < 0.49
     h = np.where(notch, np.minimum(h, -0.35), h)
@@ -274,17 +292,19 @@ def _dip_chip(u, v, t):
 
 
 def _dip_tex(u, v, t):
+    """Matte moulding finish."""
     return _waves(u, v, t, 6, (0.08, 0.2), 0.004)
 
 
 # -- organic textures ------------------------------------------------------------------------
 
 def _fabric(u, v, t):
+    """The dome the cloth lies on."""
     return _cap(u * u + v * v, 12.0, 6.0)
 
 
 def _fabric_tex(u, v, t):
-    # Plain weave: warp threads along u and weft threads along v, crossing over and under.
+    """Plain weave: warp threads along u and weft threads along v, crossing over and under."""
     p = np.float32(0.45 + 0.25 * float(t[40]))
     a, ht, w = np.float32(0.02), np.float32(0.025), np.float32(0.45)
     pu, pv = u / p, v / p
@@ -297,7 +317,7 @@ def _fabric_tex(u, v, t):
 
 
 def _leaf(u, v, t):
-    # A leaf (pointed ellipse, raised midrib) lying on a dome; outside it the bare dome.
+    """A leaf (pointed ellipse, raised midrib) lying on a dome; outside it the bare dome."""
     dome = _cap(u * u + v * v, 14.0, 6.0)
     q = np.clip(1.0 - (u / 5.5) ** 2, 0.0, 1.0)
     inside = np.abs(v) < 2.6 * q**0.8
@@ -306,7 +326,7 @@ def _leaf(u, v, t):
 
 
 def _leaf_tex(u, v, t):
-    # Lateral veins at about 50 degrees off the midrib, plus a fine cellular bumpiness.
+    """Lateral veins at about 50 degrees off the midrib, plus a fine cellular bumpiness."""
     w = (u - np.abs(v) * np.float32(0.85)) / np.float32(1.1) + float(t[40])
     dist = np.abs(w - np.round(w)) * np.float32(1.1 / 0.08)
     veins = np.maximum(1 - dist * dist, 0) * np.float32(0.025)
@@ -314,11 +334,12 @@ def _leaf_tex(u, v, t):
 
 
 def _wood(u, v, t):
+    """The wood block's dome."""
     return _cap(u * u + v * v, 15.0, 6.0)
 
 
 def _wood_tex(u, v, t):
-    # Growth rings (sharp latewood ridges) on a wavy grain, pores along it, fibre lines.
+    """Growth rings (sharp latewood ridges) on a wavy grain, pores along it, fibre lines."""
     two_pi = np.float32(2 * math.pi)
     w = v + np.float32(0.4) * np.sin(u * np.float32(2 * math.pi / 5.0) + float(two_pi * t[40])) \
         + np.float32(0.12) * np.sin(u * np.float32(2 * math.pi / 1.7) + float(two_pi * t[41]))
@@ -395,6 +416,7 @@ BALL_RADIUS_MM = 3.0
 
 
 def _ball(u, v, t):
+    """The calibration ball: a smooth sphere of radius BALL_RADIUS_MM."""
     return _cap(u * u + v * v, BALL_RADIUS_MM, BALL_RADIUS_MM)
 
 

@@ -41,6 +41,7 @@ class EntryPlan:
 
     @property
     def id(self) -> str:
+        """The entry id, e.g. seq-00001."""
         return f"{_PREFIX[self.kind]}-{self.number:05d}"
 
 

@@ -55,6 +55,7 @@ class Scene:
     effects: Effects = Effects()
 
     def __post_init__(self) -> None:
+        """Refuse inconsistent scenes: one centre and depth per frame, motion declared."""
         if len(self.centers_px) != len(self.depths_mm) or not self.centers_px:
             raise ValueError("a scene needs one centre and one depth per frame")
         if not self.effects.motion and len(set(self.centers_px)) > 1:
@@ -62,6 +63,7 @@ class Scene:
 
     @property
     def n_frames(self) -> int:
+        """Number of frames."""
         return len(self.depths_mm)
 
     def with_effects(self, effects: Effects) -> Scene:
@@ -103,10 +105,12 @@ class _Shaded:
 
 
 def _align_down(a: int, f: int) -> int:
+    """Largest multiple of f not above a."""
     return (a // f) * f
 
 
 def _align_up(a: int, f: int) -> int:
+    """Smallest multiple of f not below a."""
     return -((-a) // f) * f
 
 

@@ -63,10 +63,12 @@ def _set_threads() -> None:
 
 
 def _round(x: float, n: int = 6) -> float:
+    """Round for the manifest (short, stable JSON)."""
     return round(float(x), n)
 
 
 def _centroid(mask: np.ndarray) -> tuple[float, float] | None:
+    """Centroid (x, y) in px of a mask, or None when empty."""
     ys, xs = np.nonzero(mask)
     if not xs.size:
         return None
