@@ -24,6 +24,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from vtsbench.recordings.media import write_png
+from vtsbench.recordings.truth import Truth, write_truth
 from vtsbench.sim.objects import OBJECTS
 from vtsbench.sim.optics import Capture, sensor
 from vtsbench.sim.plan import (
@@ -33,7 +34,6 @@ from vtsbench.sim.plan import (
     static_scene,
 )
 from vtsbench.sim.scene import Effects, Scene, render
-from vtsbench.sim.truth import write_truth
 
 KINDS = ("static frame", "held sequence", "press sequence", "slip sequence", "calibration press")
 
@@ -112,7 +112,7 @@ def main() -> None:
             r = render(scene, capture, rng)
             for t, frame in enumerate(r.frames):
                 write_png(out / f"{t:03d}.png", frame)
-            write_truth(out / "truth.npz", r)
+            write_truth(out / "truth.npz", Truth(r.depth_mm, r.grad, r.contact, r.motion_px))
 
         for kind in KINDS:
             scenes = make_scenes(kind, args.scenes, size, args.mm_per_px, args.frames)

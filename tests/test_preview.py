@@ -1,14 +1,12 @@
 """`vtsbench preview` writes a contact sheet, with true depth beside frames that have it."""
 
-import io
-import zipfile
-
 import numpy as np
 from typer.testing import CliRunner
 
 from vtsbench.cli import app
 from vtsbench.preview import pick_entries
 from vtsbench.recordings.manifest import load_manifest
+from vtsbench.recordings.truth import Truth, write_truth
 
 
 def test_pick_spreads_over_kinds(make_recordings) -> None:
@@ -25,11 +23,9 @@ def test_preview_png_with_truth(make_recordings, tmp_path) -> None:
     root, _ = make_recordings()
     depth = np.zeros((1, 48, 64), np.float32)
     depth[0, 10:20, 10:20] = 0.5
-    buf = io.BytesIO()
-    np.save(buf, depth)
     (root / "truth").mkdir()
-    with zipfile.ZipFile(root / "truth" / "st-1.npz", "w") as z:
-        z.writestr("depth_mm.npy", buf.getvalue())
+    write_truth(root / "truth" / "st-1.npz",
+                Truth(depth, np.zeros((1, 48, 64, 2), np.float32), depth > 0, np.zeros((1, 2))))
     doc = json.loads((root / "recordings.json").read_text())
     doc["entries"][0]["truth"] = "truth/st-1.npz"
     (root / "recordings.json").write_text(json.dumps(doc))

@@ -12,6 +12,7 @@ from vtsbench.errors import VtsError
 from vtsbench.labels import direction_class, label_motion
 from vtsbench.recordings.manifest import load_manifest
 from vtsbench.recordings.media import read_frames, read_image
+from vtsbench.recordings.truth import read_truth
 from vtsbench.sim.simulate import simulate
 
 SMALL = {"n_static": 4, "n_sequences": 6, "n_presses": 3, "n_objects": 15, "size": (96, 128),
@@ -56,13 +57,13 @@ def test_folder_validates_and_every_file_is_there(sim: Path) -> None:
     for e in m.entries:
         src = sim / e.source.path
         frames = read_frames(src, e.source.start or 0, e.source.stop)
-        t = np.load(sim / e.truth)
+        t = read_truth(sim / e.truth)
         n = 4 if e.kind == "sequence" else 1
         assert frames.shape == (n, 96, 128, 3)
-        assert t["depth_mm"].shape == (n, 96, 128) and t["depth_mm"].dtype == np.float32
-        assert t["grad"].shape == (n, 96, 128, 2) and t["grad"].dtype == np.float32
-        assert t["contact"].shape == (n, 96, 128) and t["contact"].dtype == bool
-        assert t["motion_px"].shape == (n, 2)
+        assert t.depth_mm.shape == (n, 96, 128) and t.depth_mm.dtype == np.float32
+        assert t.grad.shape == (n, 96, 128, 2) and t.grad.dtype == np.float32
+        assert t.contact.shape == (n, 96, 128) and t.contact.dtype == bool
+        assert t.motion_px.shape == (n, 2)
     ids = [e.id for e in m.entries]
     assert ids[0] == "static-00001" and ids[4] == "seq-00001" and ids[-1] == "press-00003"
 
@@ -82,8 +83,8 @@ def test_sequence_labels_come_from_label_motion(sim: Path) -> None:
         else:
             assert e.labels.direction is None and (dx, dy) == (0.0, 0.0)
         # The truth's motion is the labelled one (pixels, y down).
-        t = np.load(sim / e.truth)
-        np.testing.assert_allclose(t["motion_px"][-1], (dx / 0.1, -dy / 0.1), atol=1e-3)
+        t = read_truth(sim / e.truth)
+        np.testing.assert_allclose(t.motion_px[-1], (dx / 0.1, -dy / 0.1), atol=1e-3)
 
 
 def test_presses_have_ball_circle_and_depth(sim: Path) -> None:
@@ -94,7 +95,7 @@ def test_presses_have_ball_circle_and_depth(sim: Path) -> None:
         assert e.ball_radius_mm == 3.0 and 0.1 <= e.labels.press_depth_mm < 3.0
         c = e.circle
         assert c.r > 4 and c.r <= c.x <= 127 - c.r and c.r <= c.y <= 95 - c.r
-        contact = np.load(sim / e.truth)["contact"][0]
+        contact = read_truth(sim / e.truth).contact[0]
         assert abs(np.pi * c.r**2 - contact.sum()) < 1.0
 
 

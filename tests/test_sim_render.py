@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 
+from vtsbench.recordings.truth import Truth, read_truth, write_npz, write_truth
 from vtsbench.sim import gel, optics
 from vtsbench.sim.motion import hold, press, sequence_scene, slip
 from vtsbench.sim.objects import BALL, GROUPS, OBJECTS, ObjectInstance, by_name, random_instance
 from vtsbench.sim.plan import ball_contact_radius_mm, press_scene
 from vtsbench.sim.scene import COUNTS, Effects, Scene, render
-from vtsbench.sim.truth import write_npz, write_truth
 
 SIZE, MPP = (96, 128), 0.1
 
@@ -105,12 +105,17 @@ def test_press_circle_matches_contact_and_depth_below_radius() -> None:
 
 def test_truth_npz_is_byte_deterministic_and_loadable(tmp_path) -> None:
     r = render(scene_of("gear", 0.3), rng=np.random.default_rng(0))
-    write_truth(tmp_path / "a.npz", r)
-    write_truth(tmp_path / "b.npz", r)
+    truth = Truth(r.depth_mm, r.grad, r.contact, r.motion_px)
+    write_truth(tmp_path / "a.npz", truth)
+    write_truth(tmp_path / "b.npz", truth)
     assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "b.npz").read_bytes()
-    t = np.load(tmp_path / "a.npz")
-    assert sorted(t.files) == ["contact", "depth_mm", "grad", "motion_px"]
-    np.testing.assert_array_equal(t["depth_mm"], r.depth_mm)
+    z = np.load(tmp_path / "a.npz")
+    assert sorted(z.files) == ["box", "contact", "depth_mm", "grad", "motion_px", "shape",
+                               "version"]
+    assert z["depth_mm"].size < r.depth_mm.size  # stored cropped
+    t = read_truth(tmp_path / "a.npz")
+    for name in ("depth_mm", "grad", "contact", "motion_px"):
+        np.testing.assert_array_equal(getattr(t, name), getattr(r, name))
     write_npz(tmp_path / "c.npz", {"x": np.arange(3)})
     assert np.load(tmp_path / "c.npz")["x"].tolist() == [0, 1, 2]
 
@@ -233,3 +238,18 @@ def test_ideal_optics_effects_render_a_uniform_background() -> None:
     far = r.depth_mm[0] == 0
     vals = r.frames[0][far].reshape(-1, 3)
     assert (vals == vals[0]).all()
+
+
+def test_truth_without_contact_and_bad_files(tmp_path) -> None:
+    z = np.zeros((2, 8, 10), np.float32)
+    empty = Truth(z, np.zeros((2, 8, 10, 2), np.float32), z.astype(bool), np.zeros((2, 2)))
+    write_truth(tmp_path / "e.npz", empty)
+    back = read_truth(tmp_path / "e.npz")
+    assert back.depth_mm.shape == (2, 8, 10) and not back.depth_mm.any()
+    from vtsbench.errors import VtsError
+
+    (tmp_path / "bad.npz").write_bytes(b"PK broken")
+    with pytest.raises(VtsError, match="not a vtsbench truth file"):
+        read_truth(tmp_path / "bad.npz")
+    with pytest.raises(VtsError, match="not found"):
+        read_truth(tmp_path / "missing.npz")

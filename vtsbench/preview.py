@@ -6,12 +6,11 @@ import math
 import random
 from pathlib import Path
 
-import numpy as np
-
 from .errors import VtsError
 from .labels import DIRECTION_NAMES
 from .recordings.manifest import Entry, Manifest, load_manifest
 from .recordings.media import read_frame
+from .recordings.truth import read_truth
 
 
 def pick_entries(m: Manifest, n: int, seed: int = 0) -> list[Entry]:
@@ -87,8 +86,7 @@ def write_preview(folder: str | Path, out: str | Path, n: int = 12, seed: int = 
         if with_truth:
             dax = axes[r][c * per + 1]
             if e.truth:
-                with np.load(folder / e.truth) as z:
-                    depth = z["depth_mm"][k]
+                depth = read_truth(folder / e.truth).depth_mm[k]
                 im = dax.imshow(depth, cmap="viridis", vmin=0.0, vmax=max(float(depth.max()), 1e-3))
                 cb = fig.colorbar(im, ax=dax, fraction=0.035, pad=0.02)
                 cb.ax.tick_params(labelsize=6)

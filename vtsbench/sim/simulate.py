@@ -78,8 +78,8 @@ def _centroid(mask: np.ndarray) -> tuple[float, float] | None:
 def run_job(job: Job) -> Entry:
     """Render one entry, write its frames and truth, and return its manifest entry."""
     from ..recordings.media import write_png
+    from ..recordings.truth import Truth, write_truth
     from .scene import render
-    from .truth import write_truth
 
     plan = job.plan
     root = Path(job.root)
@@ -93,7 +93,8 @@ def run_job(job: Job) -> Entry:
         scene = press_scene(rng, job.size, job.mm_per_px)
     rendered = render(scene, job.capture, rng)
     truth = f"truth/{plan.id}.npz"
-    write_truth(root / truth, rendered)
+    write_truth(root / truth, Truth(rendered.depth_mm, rendered.grad, rendered.contact,
+                                    rendered.motion_px))
     depth = float(scene.depths_mm[-1])
     contact_px = _centroid(rendered.contact[-1])
     obj = scene.obj
