@@ -1,0 +1,1 @@
+"""Depth: sphere calibration, gradient mapping, Poisson integration and depth metrics."""
