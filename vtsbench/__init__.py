@@ -1,1 +1,27 @@
-"""vtsbench."""
+"""vtsbench: benchmark toolkit for visuo-tactile sensing.
+
+`vtsbench.load(path_or_url)` opens a built dataset; it is imported on first use so that
+`import vtsbench` stays light (no zarr, pyarrow or torch).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .dataset.loader import load
+
+__all__ = ["load"]
+
+
+def __getattr__(name: str) -> Any:
+    """Lazy attributes: `load` imports the dataset loader on first access."""
+    if name == "load":
+        from .dataset.loader import load
+
+        return load
+    raise AttributeError(f"module 'vtsbench' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), "load"])

@@ -1,0 +1,143 @@
+"""`View.to_torch`: a torch Dataset of (tensor, target dict) over a view, for DataLoader workers.
+
+Items read only the arrays their modality needs; a batch (DataLoader's `__getitems__`) is read
+with one zarr call per contiguous run of rows. The Zarr arrays are opened lazily in each worker
+process, never pickled. This module imports torch: import it only where torch is wanted.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch.utils.data import Dataset
+
+from ..errors import VtsError
+
+if TYPE_CHECKING:
+    from .loader import View
+
+MODALITIES = ("rgb", "depth", "rgbd")
+TARGET_ARRAYS = ("depth", "contact")
+
+
+def frame_numbers(t: int, k: int) -> np.ndarray:
+    """k evenly spaced frames of a T-frame sequence, first and last included; k = 1 gives the
+    last frame (the one press depth and contact centre describe)."""
+    if not 1 <= k <= t:
+        raise VtsError(f"frames must be in 1..{t} (frames per sequence), got {k}")
+    if k == 1:
+        return np.array([t - 1])
+    return np.linspace(0, t - 1, k).round().astype(np.int64)
+
+
+def _check_size(size: Any) -> tuple[int, int] | None:
+    if size is None:
+        return None
+    try:
+        h, w = (int(v) for v in size)
+    except (TypeError, ValueError):
+        raise VtsError(f"size must be (height, width), got {size!r}") from None
+    if h < 1 or w < 1:
+        raise VtsError(f"size must be positive, got {size!r}")
+    return h, w
+
+
+def resize(x: torch.Tensor, size: tuple[int, int], mode: str = "bilinear") -> torch.Tensor:
+    """Resize (..., C, H, W) to size: bilinear (antialiased) for images, nearest for masks."""
+    if tuple(x.shape[-2:]) == size:
+        return x
+    lead = x.shape[:-3]
+    flat = x.reshape(-1, *x.shape[-3:])
+    if mode == "nearest":
+        out = F.interpolate(flat, size=size, mode="nearest")
+    else:
+        out = F.interpolate(flat, size=size, mode="bilinear", align_corners=False,
+                            antialias=True)
+    return out.reshape(*lead, *out.shape[-3:])
+
+
+class TorchView(Dataset):
+    """(tensor, target) items of a view.
+
+    tensor: rgb float32 in [0, 1] as C x H x W, depth float32 mm as one channel, rgbd both
+    (4 channels); slip items are T x C x H x W. target: sample_id, class_idx, press_depth_mm
+    (NaN when unknown) and for slip state_idx, direction (-1 when none) and motion_mm (2,),
+    plus the arrays named in `targets` ("depth" in mm, "contact" bool) as (T x) H x W.
+    """
+
+    def __init__(self, view: View, modality: str = "rgb", size: Sequence[int] | None = None,
+                 frames: int | None = None, transform: Callable[[Any], Any] | None = None,
+                 targets: Sequence[str] = ()) -> None:
+        if modality not in MODALITIES:
+            raise VtsError(f"unsupported modality {modality!r}; use one of "
+                           f"{', '.join(MODALITIES)}")
+        bad = [t for t in targets if t not in TARGET_ARRAYS]
+        if bad:
+            raise VtsError(f"unknown target array {bad[0]!r}; use {', '.join(TARGET_ARRAYS)}")
+        if frames is not None and view.kind != "slip":
+            raise VtsError("frames apply to slip sequences only")
+        self.view, self.modality, self.transform = view, modality, transform
+        self.size = _check_size(size)
+        self.targets = tuple(targets)
+        t = view.dataset.info.frames_per_sequence
+        self.frames = None if frames is None else frame_numbers(t, int(frames))
+        inputs = {"rgb": ("rgb",), "depth": ("depth",), "rgbd": ("rgb", "depth")}[modality]
+        self.arrays = tuple(dict.fromkeys(inputs + self.targets))
+
+    def __len__(self) -> int:
+        return len(self.view)
+
+    def __repr__(self) -> str:
+        return (f"TorchView({self.view.kind}, {len(self)} samples, modality={self.modality}, "
+                f"size={self.size}, frames={None if self.frames is None else len(self.frames)})")
+
+    def __getitem__(self, i: int) -> tuple[Any, dict[str, Any]]:
+        return self.__getitems__([i])[0]
+
+    def __getitems__(self, items: Sequence[int]) -> list[tuple[Any, dict[str, Any]]]:
+        """Several items read together (DataLoader calls this for a batch)."""
+        items = [int(i) for i in items]
+        arrays = self.view.read(items, self.arrays, frames=self.frames)
+        metas = self.view.metas(items)
+        return [self._item({n: a[k] for n, a in arrays.items()}, metas[k])
+                for k in range(len(items))]
+
+    def _item(self, arrays: dict[str, np.ndarray], meta: dict[str, Any]
+              ) -> tuple[Any, dict[str, Any]]:
+        chans = []
+        if "rgb" in self.arrays and self.modality != "depth":
+            rgb = torch.from_numpy(np.ascontiguousarray(arrays["rgb"]))
+            chans.append(rgb.movedim(-1, -3).contiguous().to(torch.float32).div_(255.0))
+        if self.modality != "rgb":
+            chans.append(torch.from_numpy(np.ascontiguousarray(arrays["depth"])).unsqueeze(-3))
+        x = chans[0] if len(chans) == 1 else torch.cat(chans, dim=-3)
+        if self.size is not None:
+            x = resize(x, self.size)
+        if self.transform is not None:
+            x = self.transform(x)
+        return x, self._target(arrays, meta)
+
+    def _target(self, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> dict[str, Any]:
+        def num(v: float | None) -> float:
+            return math.nan if v is None else float(v)
+
+        t: dict[str, Any] = {"sample_id": meta["sample_id"], "class_idx": meta["class_idx"],
+                             "press_depth_mm": num(meta["press_depth_mm"])}
+        if self.view.kind == "slip":
+            motion = meta["motion_mm"] or (math.nan, math.nan)
+            t["state_idx"] = -1 if meta["state_idx"] is None else meta["state_idx"]
+            t["direction"] = -1 if meta["direction"] is None else meta["direction"]
+            t["motion_mm"] = torch.tensor(motion, dtype=torch.float32)
+        for name in self.targets:
+            a = torch.from_numpy(np.ascontiguousarray(arrays[name]))
+            if self.size is not None:
+                mode = "nearest" if name == "contact" else "bilinear"
+                a = resize(a.unsqueeze(-3).to(torch.float32), self.size, mode).squeeze(-3)
+                a = a > 0.5 if name == "contact" else a
+            t[name] = a
+        return t
