@@ -1,0 +1,64 @@
+"""The parquet index of a dataset (`index/static.parquet`, `index/slip.parquet`): write and read.
+
+Rows are written in Zarr row order with the schema of `schema.index_schema(kind)`; the writer's
+settings are fixed, so the same rows give the same bytes.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from ..errors import VtsError
+from .schema import SampleMeta, index_schema
+
+#: Parquet settings: zstd pages, one row group (an index is small), statistics on.
+PARQUET_OPTIONS: dict[str, Any] = {"compression": "zstd", "compression_level": 3,
+                                   "use_dictionary": True, "write_statistics": True,
+                                   "row_group_size": 1 << 20}
+
+
+def index_bytes(kind: str, metas: Sequence[SampleMeta]) -> bytes:
+    """The parquet file of one kind's index; rows must be in row order 0..N-1."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    for i, m in enumerate(metas):
+        if m.kind != kind or m.row != i:
+            raise ValueError(f"index row {i}: sample {m.sample_id!r} ({m.kind}, row {m.row}) is "
+                             f"out of place in the {kind} index")
+    table = pa.Table.from_pylist([m.to_row() for m in metas], schema=index_schema(kind))
+    buf = io.BytesIO()
+    pq.write_table(table, buf, **PARQUET_OPTIONS)
+    return buf.getvalue()
+
+
+def write_index(path: Path, kind: str, metas: Sequence[SampleMeta]) -> None:
+    """Write one kind's index atomically."""
+    from .store import write_file
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_file(path, index_bytes(kind, metas))
+
+
+def read_index(path: Path, kind: str) -> list[SampleMeta]:
+    """Read one kind's index back into SampleMeta rows; one-line VtsError when unreadable."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    if not path.is_file():
+        raise VtsError("index not found", path)
+    try:
+        table = pq.read_table(path)
+    except (pa.ArrowException, OSError) as e:
+        raise VtsError(f"not a readable parquet file ({e})", path) from None
+    want = index_schema(kind)
+    if not table.schema.remove_metadata().equals(want):
+        have = ", ".join(f"{f.name}: {f.type}" for f in table.schema)
+        raise VtsError(f"columns differ from the {kind} index schema (found {have})", path)
+    try:
+        return [SampleMeta.from_row(r, kind) for r in table.to_pylist()]
+    except (TypeError, ValueError) as e:
+        raise VtsError(f"bad row ({e})", path) from None

@@ -1,0 +1,238 @@
+"""Zarr v3 arrays of a dataset: layout, metadata, whole-shard encoding, reading from a path or URL.
+
+Every array (`rgb`, `depth`, `contact`) has one sample per inner chunk and shards of
+`samples_per_shard` whole samples. Shards are encoded in memory by zarr itself (an array of the
+shard's own rows on a dict-backed store) and written as one file through a temporary name and a
+rename, so a shard file is complete or absent and a build can write shards from many processes
+without zarr ever reading back a partial shard. Inner chunks are zstd-compressed (level 0: not
+compressed) and carry a crc32c, so a damaged byte is pinned to one sample on reading.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import secrets
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import VtsError
+
+ARRAYS = ("rgb", "depth", "contact")
+KINDS = ("static", "slip")
+DTYPES = {"rgb": "uint8", "depth": "int16", "contact": "bool"}
+#: Depth is stored as int16 counts of this many mm: +-32.767 mm in 1 um steps.
+DEPTH_SCALE_MM = 0.001
+DEPTH_MIN_MM = -32768 * DEPTH_SCALE_MM
+DEPTH_MAX_MM = 32767 * DEPTH_SCALE_MM
+#: Target uncompressed size of one RGB shard; depth and contact shards hold the same samples.
+SHARD_BYTES = 32 * 2**20
+TMP_SUFFIX = ".tmp"
+
+
+def depth_to_int16(depth_mm: np.ndarray) -> np.ndarray:
+    """mm (float) -> int16 counts of DEPTH_SCALE_MM: rounded to nearest, clipped, NaN -> 0."""
+    counts = np.rint(np.nan_to_num(np.asarray(depth_mm, np.float64), nan=0.0,
+                                   posinf=DEPTH_MAX_MM, neginf=DEPTH_MIN_MM) / DEPTH_SCALE_MM)
+    return np.clip(counts, -32768, 32767).astype(np.int16)
+
+
+def depth_to_mm(counts: np.ndarray) -> np.ndarray:
+    """int16 counts -> mm float32 (counts x DEPTH_SCALE_MM)."""
+    return np.asarray(counts).astype(np.float32) * np.float32(DEPTH_SCALE_MM)
+
+
+def samples_per_shard(frame: tuple[int, int], frames: int | None,
+                      target_bytes: int = SHARD_BYTES) -> int:
+    """Whole samples per shard so that an RGB shard is about target_bytes uncompressed."""
+    rgb = frame[0] * frame[1] * 3 * (frames or 1)
+    return max(1, int(target_bytes) // rgb)
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Shapes and storage settings of one kind's group (static.zarr or slip.zarr)."""
+
+    kind: str
+    n: int
+    frame: tuple[int, int]  # (H, W)
+    frames: int | None  # T for slip, None for static
+    samples_per_shard: int
+    level: int  # zstd level; 0 stores the chunks uncompressed
+
+    def sample_shape(self, name: str) -> tuple[int, ...]:
+        lead = (self.frames,) if self.frames else ()
+        return (*lead, *self.frame, 3) if name == "rgb" else (*lead, *self.frame)
+
+    def shape(self, name: str) -> tuple[int, ...]:
+        return (self.n, *self.sample_shape(name))
+
+    @property
+    def n_shards(self) -> int:
+        return -(-self.n // self.samples_per_shard)
+
+    def shard_rows(self, k: int) -> range:
+        """Rows held by shard k."""
+        s = self.samples_per_shard
+        return range(k * s, min((k + 1) * s, self.n))
+
+    def shard_key(self, name: str, k: int) -> str:
+        """Path of shard k of an array, relative to the group (e.g. `rgb/c/3/0/0/0`)."""
+        idx = (k,) + (0,) * len(self.sample_shape(name))
+        return f"{name}/c/" + "/".join(map(str, idx))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"n": self.n, "frame": list(self.frame), "frames": self.frames,
+                "samples_per_shard": self.samples_per_shard, "level": self.level}
+
+
+def _codecs(level: int) -> list[Any]:
+    from zarr.codecs import Crc32cCodec, ZstdCodec
+
+    return ([ZstdCodec(level=level), Crc32cCodec()] if level > 0 else [Crc32cCodec()])
+
+
+def _create(store: Any, layout: Layout, n: int) -> dict[str, Any]:
+    """Create the group and its three arrays with n rows on a zarr store; returns the arrays."""
+    import zarr
+
+    group = zarr.create_group(store, attributes=_group_attrs(layout), overwrite=True)
+    out = {}
+    for name in ARRAYS:
+        sample = layout.sample_shape(name)
+        out[name] = group.create_array(
+            name, shape=(n, *sample), dtype=DTYPES[name], chunks=(1, *sample),
+            shards=(layout.samples_per_shard, *sample), compressors=_codecs(layout.level),
+            fill_value=0 if name != "contact" else False, attributes=_array_attrs(name),
+            dimension_names=_dims(name, layout.frames is not None),
+            config={"write_empty_chunks": True})
+    return out
+
+
+def _dims(name: str, seq: bool) -> list[str]:
+    dims = ["sample", *(["frame"] if seq else []), "y", "x"]
+    return [*dims, "channel"] if name == "rgb" else dims
+
+
+def _group_attrs(layout: Layout) -> dict[str, Any]:
+    return {"vtsbench": {"kind": layout.kind, "samples_per_shard": layout.samples_per_shard,
+                         "frames": layout.frames, "compression": _compression(layout.level)}}
+
+
+def _compression(level: int) -> str:
+    return f"zstd level {level}" if level > 0 else "none"
+
+
+def _array_attrs(name: str) -> dict[str, Any]:
+    if name == "depth":
+        return {"units": "mm", "scale": DEPTH_SCALE_MM,
+                "meaning": "indentation into the gel, positive into the gel",
+                "clipped_to_mm": [DEPTH_MIN_MM, DEPTH_MAX_MM]}
+    if name == "rgb":
+        return {"channels": "RGB"}
+    return {"meaning": "contact mask estimated with the depth"}
+
+
+def write_metadata(group_dir: Path, layout: Layout) -> list[Path]:
+    """Write the group's and arrays' zarr.json (consolidated) without touching any shard file."""
+    import zarr
+    from zarr.storage import MemoryStore
+
+    docs: dict[str, Any] = {}
+    store = MemoryStore(docs)
+    _create(store, layout, layout.n)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # consolidated metadata is not in the v3 spec yet
+        zarr.consolidate_metadata(store)
+    written = []
+    for key, buf in sorted(docs.items()):
+        if key.endswith("zarr.json"):
+            path = group_dir / key
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_file(path, buf.to_bytes())
+            written.append(path)
+    return written
+
+
+def encode_shard(layout: Layout, name: str, block: np.ndarray) -> bytes:
+    """The bytes of one shard file holding `block` (the shard's rows, in order)."""
+    from zarr.storage import MemoryStore
+
+    want = (len(block), *layout.sample_shape(name))
+    if block.shape != want or len(block) > layout.samples_per_shard or not len(block):
+        raise ValueError(f"{name}: shard block of shape {block.shape}, expected {want} with at "
+                         f"most {layout.samples_per_shard} rows")
+    docs: dict[str, Any] = {}
+    arr = _create(MemoryStore(docs), layout, len(block))[name]
+    arr[...] = block.astype(DTYPES[name], copy=False)
+    return docs[layout.shard_key(name, 0)].to_bytes()
+
+
+def write_shard(group_dir: Path, layout: Layout, k: int,
+                blocks: dict[str, np.ndarray]) -> dict[str, int]:
+    """Encode and write shard k of every array; returns each file's size in bytes."""
+    sizes = {}
+    for name in ARRAYS:
+        data = encode_shard(layout, name, blocks[name])
+        path = group_dir / layout.shard_key(name, k)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_file(path, data)
+        sizes[name] = len(data)
+    return sizes
+
+
+def write_file(path: Path, data: bytes) -> None:
+    """Write a file through a unique temporary name in its folder and a rename.
+
+    Unlike mkstemp the file gets the ordinary permissions (umask), so a shared dataset is
+    readable by others; a temporary left by a killed process ends in TMP_SUFFIX and is removed
+    when the build finishes.
+    """
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}{TMP_SUFFIX}")
+    try:
+        with open(tmp, "xb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_json(path: Path, doc: Any) -> None:
+    """Write JSON with sorted keys and a final newline (stable bytes)."""
+    write_file(path, (json.dumps(doc, indent=1, sort_keys=True, allow_nan=False) + "\n")
+               .encode("utf-8"))
+
+
+def _is_url(location: str | os.PathLike) -> bool:
+    return "://" in str(location)
+
+
+def group_location(root: str | os.PathLike, kind: str) -> str:
+    """Location of a kind's group under a dataset root (path or URL)."""
+    return f"{str(root).rstrip('/')}/data/{kind}.zarr"
+
+
+def open_group(root: str | os.PathLike, kind: str,
+               storage_options: dict[str, Any] | None = None) -> Any:
+    """Open a dataset's `static` or `slip` group read-only, from a path or an fsspec URL."""
+    import zarr
+    from zarr.storage import FsspecStore, LocalStore
+
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+    loc = group_location(root, kind)
+    if _is_url(loc):
+        store = FsspecStore.from_url(loc, storage_options=storage_options, read_only=True)
+    else:
+        if not Path(loc).is_dir():
+            raise VtsError("no such Zarr group", loc)
+        store = LocalStore(loc, read_only=True)
+    try:
+        return zarr.open_group(store, mode="r", use_consolidated=True)
+    except (FileNotFoundError, ValueError, KeyError) as e:
+        raise VtsError(f"cannot open the Zarr group ({e})", loc) from None
