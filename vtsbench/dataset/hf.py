@@ -2,7 +2,8 @@
 
 Built offline by `Dataset.from_generator` into Arrow files under `cache_dir`, a few rows per
 write (`writer_batch_size`) because a slip row holds megabytes. Arrays are fixed-shape features:
-rgb uint8, depth float32 mm, contact bool; `.with_format("numpy")` returns them as arrays.
+rgb uint8, depth float32 mm, contact bool; `.with_format("numpy")` returns them as arrays
+(datasets widens integer arrays to int64 there: `.astype(np.uint8)` restores rgb).
 """
 
 from __future__ import annotations

@@ -15,6 +15,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import zarr
+from zarr.storage import WrapperStore
 
 from ..errors import VtsError
 from . import store
@@ -88,6 +90,25 @@ class Location:
                 raise VtsError(text, self.path(rel)) from None
 
 
+class StrictStore(WrapperStore):
+    """A read-only zarr store on which a missing chunk or shard is an error, never fill values
+    (an incomplete copy of a dataset must not read as zeros)."""
+
+    def __init__(self, store: Any, location: str) -> None:
+        super().__init__(store)
+        self.location = location
+
+    def _with_store(self, store: Any) -> StrictStore:
+        return type(self)(store, self.location)
+
+    async def get(self, key: str, prototype: Any, byte_range: Any = None) -> Any:
+        buf = await self._store.get(key, prototype, byte_range)
+        if buf is None and "/c/" in key:
+            raise VtsError("missing (an incomplete copy of the dataset?)",
+                           f"{self.location}/{key}")
+        return buf
+
+
 class KindStore:
     """One kind's index (pyarrow Table) and its Zarr arrays, opened lazily once per process."""
 
@@ -128,7 +149,9 @@ class KindStore:
         if self._pid != os.getpid():
             self._pid, self._group = os.getpid(), None
         if self._group is None:
-            self._group = store.open_group(self.loc.url, self.kind, self.loc.storage_options)
+            group = store.open_group(self.loc.url, self.kind, self.loc.storage_options)
+            strict = StrictStore(group.store, store.group_location(self.loc.url, self.kind))
+            self._group = zarr.open_group(strict, mode="r", use_consolidated=True)
         return self._group[name]
 
     def sample_nbytes(self, names: Sequence[str]) -> int:
