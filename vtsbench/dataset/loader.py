@@ -20,7 +20,7 @@ from zarr.storage import WrapperStore
 
 from ..errors import VtsError
 from . import store
-from .schema import INFO_PATH, KINDS, SLIP_ONLY, DatasetInfo, SplitFile, load_info
+from .schema import INFO_PATH, KINDS, DatasetInfo, SplitFile, index_schema, load_info
 from .splits import read_split
 
 if TYPE_CHECKING:
@@ -31,9 +31,6 @@ if TYPE_CHECKING:
 ARRAYS = store.ARRAYS
 #: Bytes of decoded arrays read per call while iterating over a view.
 ITER_BYTES = 64 * 2**20
-INDEX_REQUIRED = ("sample_id", "row", "object", "class_idx", "session", "sensor",
-                  "mm_per_px_x", "mm_per_px_y", "press_depth_mm", "contact_x_px",
-                  "contact_y_px", "source")
 
 
 class SampleIndexError(VtsError, IndexError):
@@ -489,7 +486,8 @@ class VtsDataset:
 
 
 def _read_index(loc: Location, kind: str, info: DatasetInfo) -> pa.Table:
-    """index/<kind>.parquet, checked: the columns there, rows a permutation of the arrays."""
+    """index/<kind>.parquet as a Table, checked like index.read_index (the kind's schema) and
+    against the arrays (rows 0..N-1); read whole through fsspec for URLs."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -503,10 +501,10 @@ def _read_index(loc: Location, kind: str, info: DatasetInfo) -> pa.Table:
         raise VtsError("index not found", loc.path(rel)) from None
     except pa.ArrowException as e:
         raise VtsError(f"not a readable parquet file ({e})", loc.path(rel)) from None
-    want = INDEX_REQUIRED + (SLIP_ONLY if kind == "slip" else ())
-    missing = [c for c in want if c not in table.column_names]
-    if missing:
-        raise VtsError(f"index lacks column(s) {', '.join(missing)}", loc.path(rel))
+    if not table.schema.remove_metadata().equals(index_schema(kind)):
+        have = ", ".join(f"{f.name}: {f.type}" for f in table.schema)
+        raise VtsError(f"columns differ from the {kind} index schema (found {have})",
+                       loc.path(rel))
     n = info.shapes.get(kind, {}).get("rgb", (0,))[0]
     rows = np.sort(table.column("row").to_numpy())
     if len(rows) != n or not np.array_equal(rows, np.arange(n)):
