@@ -168,6 +168,115 @@ def preview(
     typer.echo(f"wrote {out} ({shown} entries)")
 
 
+@app.command()
+def build(
+    recordings: Annotated[Path, typer.Argument(help="Recordings folder (with recordings.json).")],
+    out: Annotated[Path, typer.Argument(help="Dataset folder to create.")],
+    calibration: Annotated[Path | None, typer.Option(
+        help="Calibration file (default: RECORDINGS/calibration.safetensors, as written by "
+             "`vtsbench calibrate RECORDINGS --out RECORDINGS/calibration.safetensors`).")
+    ] = None,
+    solver: Annotated[str, typer.Option(help="Depth solver: dct, dst or masked.")] = "dct",
+    frames: Annotated[int, typer.Option(min=1, help="Frames per slip sample (T).")] = 8,
+    workers: Annotated[int, typer.Option(
+        min=1, help="Worker processes (or Dask workers with --scheduler local).")] = 1,
+    scheduler: Annotated[str | None, typer.Option(
+        help="Dask scheduler address (tcp://host:8786), or 'local' for a LocalCluster of "
+             "--workers processes. OUT must be on a file system the workers share.")] = None,
+    skip_bad: Annotated[bool, typer.Option(
+        help="Leave bad recordings out (listed in meta/build_report.json) instead of "
+             "stopping.")] = False,
+    overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
+    version: Annotated[str, typer.Option(
+        help="Dataset version (semantic version of the content).")] = "1.0.0",
+    compression_level: Annotated[int, typer.Option(
+        min=0, max=22, help="zstd level of the arrays; 0 stores them uncompressed.")] = 3,
+    seed: Annotated[int, typer.Option(min=0, help="Seed of the split files.")] = 0,
+    shard_mb: Annotated[float, typer.Option(
+        help="Target uncompressed RGB shard size in MB (whole samples per shard).")] = 32.0,
+    quiet: Annotated[bool, typer.Option(help="No progress bars.")] = False,
+) -> None:
+    """Build an RGB-D dataset (Zarr + parquet index + splits + card) from a recordings folder.
+
+    Atomic and resumable: writes into .OUT.partial beside OUT; rerun the same command after an
+    interruption and finished shards are kept. Example:
+    [bold]vtsbench build data/rec data/ds --workers 2[/]
+    """
+    from rich.console import Console
+
+    from .dataset.build import BuildOptions
+    from .dataset.build import build as run_build
+
+    console = Console(stderr=True, highlight=False)
+    opts = BuildOptions(calibration=calibration, solver=solver, frames=frames, workers=workers,
+                        scheduler=scheduler, skip_bad=skip_bad, overwrite=overwrite,
+                        version=version, compression_level=compression_level, seed=seed,
+                        shard_mb=shard_mb, progress=not quiet)
+    res = _run(run_build, recordings, out, opts, log=lambda m: console.print(m, soft_wrap=True))
+    _print_build(res)
+
+
+def _print_build(res) -> None:
+    """The skipped entries and a summary table of a build."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from .dataset.summary import human
+
+    console = Console(highlight=False)
+    for eid, why in res.skipped.items():
+        console.print(f"[yellow]skipped[/] {eid}: {why}", soft_wrap=True)
+    for name, why in res.splits_skipped.items():
+        console.print(f"[yellow]split not made[/] {name}: {why}", soft_wrap=True)
+    t = Table(title=f"built {res.out}", title_justify="left")
+    for c in ("kind", "samples", "frames", "shards"):
+        t.add_column(c, justify="left" if c == "kind" else "right")
+    for kind in ("static", "slip"):
+        t.add_row(kind, str(res.samples[kind]), str(res.frames[kind]), str(res.shards[kind]))
+    console.print(t)
+    frames, size = sum(res.frames.values()), human(sum(res.bytes_on_disk.values()))
+    console.print(f"{frames} frames in {res.seconds:.1f} s ({frames / max(res.seconds, 1e-9):.0f}"
+                  f" frames/s); shards built {res.shards_built}, kept from a partial build "
+                  f"{res.shards_kept}; {len(res.skipped)} entries skipped; splits: "
+                  f"{', '.join(res.splits) or 'none'}; {size} on disk")
+
+
+@app.command()
+def info(
+    dataset: Annotated[Path, typer.Argument(help="Dataset folder (made by vtsbench build).")],
+) -> None:
+    """Summarise a dataset: samples per object, state, direction and split part; sizes on disk;
+    versions and checksum."""
+    from rich.console import Console
+
+    from .dataset.summary import render, summarise
+
+    render(_run(summarise, dataset), Console(highlight=False))
+
+
+@app.command()
+def verify(
+    dataset: Annotated[Path, typer.Argument(help="Dataset folder (made by vtsbench build).")],
+    quick: Annotated[bool, typer.Option(
+        help="Skip decoding every chunk (checksums, schema, index, splits and shapes only).")
+    ] = False,
+) -> None:
+    """Check a dataset: every file's sha256, info.json and split schemas, index and array shapes,
+    split leaks, and decode every chunk; exit 1 on any problem."""
+    from rich.console import Console
+
+    from .dataset.verify import verify as run_verify
+
+    report = _run(run_verify, dataset, decode=not quick, progress=True)
+    console = Console(highlight=False)
+    for p in report.problems:
+        console.print(f"[red]problem[/] {p}", soft_wrap=True)
+    console.print(f"{report.files} files, {report.samples} samples, {report.shards} shards "
+                  f"checked: {len(report.problems)} problem(s)")
+    if report.problems:
+        raise typer.Exit(1)
+
+
 # -- collect: registered below --
 
 

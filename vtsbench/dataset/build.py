@@ -1,0 +1,860 @@
+"""`vtsbench build`: a recordings folder -> an RGB-D dataset, in whole-shard tasks, resumable.
+
+The plan (samples, rows, shards) comes from the manifest alone. Every shard is one task that
+decodes its samples' frames, makes depth and contact with the calibration, writes the shard
+file of each array and then a marker holding the fingerprint of everything those bytes depend
+on. A rerun keeps every shard whose marker still matches and redoes the others; the metadata,
+index, splits and checksums are written last from the plan. Nothing depends on time, process
+or worker count, so a resumed build, a process pool and a Dask cluster give the same bytes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import VtsError
+from ..recordings.manifest import Entry, Manifest
+from .schema import SampleMeta
+from .store import ARRAYS, KINDS, TMP_SUFFIX, Layout
+
+CALIBRATION_NAME = "calibration.safetensors"
+#: Bumped whenever the bytes a shard task writes change for the same inputs.
+FINGERPRINT_VERSION = 1
+#: Build state inside the partial folder (markers, lock); removed before the final rename.
+WORK = ".build"
+SOLVERS = ("dct", "dst", "masked")
+
+
+@dataclass(frozen=True)
+class BuildOptions:
+    """The parameters of `vtsbench build` (docs/dataset.md, Building)."""
+
+    calibration: Path | None = None
+    solver: str = "dct"
+    frames: int = 8
+    workers: int = 1
+    scheduler: str | None = None
+    skip_bad: bool = False
+    overwrite: bool = False
+    version: str = "1.0.0"
+    compression_level: int = 3
+    seed: int = 0
+    shard_mb: float = 32.0
+    progress: bool = False
+
+
+@dataclass(frozen=True)
+class SampleSource:
+    """Where one sample's frames are: its entry, the source path and the frame range."""
+
+    entry_id: str
+    sample_id: str
+    path: str
+    start: int
+    stop: int
+
+
+@dataclass
+class Plan:
+    """Samples of both kinds in row order, their sources, array layouts, and bad entries."""
+
+    metas: dict[str, list[SampleMeta]]
+    sources: dict[str, list[SampleSource]]
+    layouts: dict[str, Layout]
+    objects: list[str]
+    bad: dict[str, str]
+
+    @property
+    def samples(self) -> list[SampleMeta]:
+        return [m for k in KINDS for m in self.metas[k]]
+
+
+@dataclass(frozen=True)
+class ShardTask:
+    """One shard of one kind: everything a worker needs, as plain picklable values."""
+
+    kind: str
+    k: int
+    root: str
+    group_dir: str
+    marker: str
+    layout: Layout
+    samples: tuple[SampleSource, ...]
+    calibration: str
+    solver: str
+    fingerprint: str
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.samples) * (self.layout.frames or 1)
+
+
+@dataclass
+class ShardResult:
+    """What a shard task did: frames written, or the entries it could not read."""
+
+    kind: str
+    k: int
+    frames: int = 0
+    nbytes: int = 0
+    bad: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class BuildResult:
+    """What `build` made, for the summary: counts, shards built and kept, skipped entries."""
+
+    out: Path
+    samples: dict[str, int]
+    frames: dict[str, int]
+    shards: dict[str, int]
+    shards_built: int
+    shards_kept: int
+    skipped: dict[str, str]
+    splits: list[str]
+    splits_skipped: dict[str, str]
+    bytes_on_disk: dict[str, int]
+    seconds: float
+    warnings: list[str] = field(default_factory=list)
+
+
+# -- inputs ---------------------------------------------------------------------------------
+
+
+def resolve_calibration(root: Path, path: Path | None) -> Path:
+    """The calibration file: --calibration, else RECORDINGS/calibration.safetensors."""
+    if path is not None:
+        if not Path(path).is_file():
+            raise VtsError("calibration file not found", path)
+        return Path(path).resolve()
+    default = root / CALIBRATION_NAME
+    if not default.is_file():
+        raise VtsError(f"no calibration: make one with `vtsbench calibrate {root} --out "
+                       f"{default}` (or pass --calibration FILE)")
+    return default.resolve()
+
+
+def sha256_file(path: Path) -> str:
+    """sha256 of a file, read in 4 MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(4 << 20):
+            h.update(block)
+    return h.hexdigest()
+
+
+def screen_entries(root: Path, manifest: Manifest, frames: int,
+                   workers: int = 2) -> tuple[dict[str, str], list[str]]:
+    """Bad sample entries (id -> reason) found cheaply up front, and warnings.
+
+    Reuses `vtsbench check` (files present and decodable at the ends of each range, sizes,
+    labels); a problem that belongs to no entry (a duplicate id) is an error for the whole
+    build. Adds what a build needs beyond a valid folder: an object name, T frames.
+    """
+    from ..recordings.check import check_folder
+
+    report = check_folder(root, deep=False, workers=max(1, workers))
+    kinds = {e.id: e.kind for e in manifest.entries}
+    per: dict[str, list[str]] = {}
+    warnings = list(report.warnings)
+    for p in report.problems:
+        eid, sep, rest = p.partition(": ")
+        if sep and eid in kinds:
+            if kinds[eid] != "press":  # presses are not samples (they made the calibration)
+                per.setdefault(eid, []).append(rest)
+        elif p.startswith("session "):
+            warnings.append(p)
+        else:
+            more = len(report.problems) - 1
+            raise VtsError(p + (f" (and {more} more problems; run `vtsbench check`)"
+                                if more else ""))
+    for e in manifest.entries:
+        if e.kind == "press" or e.id in per:
+            continue
+        if not e.object:
+            per[e.id] = ["no object name (class_idx and the splits need one)"]
+        elif e.kind == "sequence":
+            n = _sequence_length(root, e)
+            if n < frames:
+                per[e.id] = [f"{e.source.path}: sequence of {n} frames is shorter than "
+                             f"--frames {frames}"]
+    return {k: "; ".join(v) for k, v in per.items()}, warnings
+
+
+def _sequence_length(root: Path, e: Entry) -> int:
+    from ..recordings.media import probe
+
+    start = e.source.start or 0
+    stop = e.source.stop if e.source.stop is not None else probe(root / e.source.path).n_frames
+    return max(0, stop - start)
+
+
+# -- plan -----------------------------------------------------------------------------------
+
+
+def _windows(root: Path, e: Entry, frames: int) -> list[tuple[str, int, int]]:
+    """(sample id, start, stop) of each sample of an entry."""
+    if e.kind == "static":
+        f = e.source.frame or 0
+        return [(e.id, f, f + 1)]
+    start = e.source.start or 0
+    n = _sequence_length(root, e) // frames
+    if n == 1:
+        return [(e.id, start, start + frames)]
+    return [(f"{e.id}-w{k:03d}", start + k * frames, start + (k + 1) * frames) for k in range(n)]
+
+
+def make_plan(root: Path, manifest: Manifest, bad: dict[str, str], *, frames: int,
+              resolution: tuple[int, int], mm_per_px: tuple[float, float],
+              samples_per_shard: dict[str, int], level: int) -> Plan:
+    """Samples in manifest order (windows in order), rows, class indices and layouts."""
+    rows: dict[str, list[tuple[dict[str, Any], SampleSource]]] = {k: [] for k in KINDS}
+    for e in manifest.entries:
+        if e.kind == "press" or e.id in bad:
+            continue
+        kind = "static" if e.kind == "static" else "slip"
+        ses = manifest.session(e.session)
+        mx, my = ses.mm_per_px or mm_per_px
+        lab = e.labels
+        for sid, a, b in _windows(root, e, frames):
+            d: dict[str, Any] = {
+                "sample_id": sid, "kind": kind, "object": e.object, "session": ses.id,
+                "sensor": ses.sensor, "mm_per_px_x": float(mx), "mm_per_px_y": float(my),
+                "source": f"{e.source.path}[{a}:{b}]", "press_depth_mm": lab.press_depth_mm,
+                "contact_x_px": None if lab.contact_px is None else lab.contact_px[0],
+                "contact_y_px": None if lab.contact_px is None else lab.contact_px[1]}
+            if kind == "slip":
+                d.update(state=lab.state, direction=lab.direction if lab.state == "slip" else None,
+                         motion_dx_mm=None if lab.motion_mm is None else lab.motion_mm[0],
+                         motion_dy_mm=None if lab.motion_mm is None else lab.motion_mm[1])
+            rows[kind].append((d, SampleSource(e.id, sid, e.source.path, a, b)))
+    seen: dict[str, str] = {}
+    for kind in KINDS:
+        for d, src in rows[kind]:
+            if d["sample_id"] in seen:
+                raise VtsError(f"sample id {d['sample_id']!r} of entry {src.entry_id} is also "
+                               f"made by entry {seen[d['sample_id']]} (ids must be unique)")
+            seen[d["sample_id"]] = src.entry_id
+    objects = sorted({d["object"] for kind in KINDS for d, _ in rows[kind]})
+    metas = {kind: [SampleMeta(**d, row=i, class_idx=objects.index(d["object"]))
+                    for i, (d, _) in enumerate(rows[kind])] for kind in KINDS}
+    layouts = {kind: Layout(kind, len(rows[kind]), resolution,
+                            frames if kind == "slip" else None, samples_per_shard[kind], level)
+               for kind in KINDS}
+    return Plan(metas, {k: [s for _, s in rows[k]] for k in KINDS}, layouts, objects,
+                dict(bad))
+
+
+# -- fingerprints ---------------------------------------------------------------------------
+
+
+def _versions() -> dict[str, str]:
+    """Versions of what shapes the bytes: vtsbench, the codecs, numpy, OpenCV, pyarrow."""
+    import cv2
+    import numcodecs
+    import pyarrow
+    import zarr
+
+    return {"vtsbench": package_version(), "zarr": zarr.__version__,
+            "numcodecs": numcodecs.__version__, "numpy": np.__version__,
+            "opencv": cv2.__version__, "pyarrow": pyarrow.__version__}
+
+
+def package_version() -> str:
+    """The installed vtsbench version ('unknown' when running from a bare source tree)."""
+    try:
+        from importlib.metadata import version
+
+        return version("vtsbench")
+    except Exception:
+        return "unknown"
+
+
+class SourceStats:
+    """Size and modification time of source files (folders listed once): a cheap change test."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self._folders: dict[str, list[Path]] = {}
+
+    def of(self, src: SampleSource) -> list[Any]:
+        from ..recordings.media import folder_frames
+
+        path = self.root / src.path
+        try:
+            if path.is_dir():
+                if src.path not in self._folders:
+                    self._folders[src.path] = folder_frames(path)
+                files = self._folders[src.path][src.start:src.stop]
+                return [[f.name, *self._stat(f)] for f in files]
+            return self._stat(path)
+        except OSError:
+            return ["missing"]
+
+    @staticmethod
+    def _stat(path: Path) -> list[int]:
+        st = path.stat()
+        return [st.st_size, st.st_mtime_ns]
+
+
+def shard_tasks(plan: Plan, root: Path, stage: Path, calibration: Path, cal_sha: str,
+                solver: str) -> list[ShardTask]:
+    """One task per shard of each kind, with the fingerprint of everything its bytes use."""
+    stats = SourceStats(root)
+    base = {"version": FINGERPRINT_VERSION, "versions": _versions(), "calibration": cal_sha,
+            "solver": solver}
+    tasks = []
+    for kind in KINDS:
+        lay = plan.layouts[kind]
+        group = stage / "data" / f"{kind}.zarr"
+        for k in range(lay.n_shards):
+            rows = lay.shard_rows(k)
+            samples = tuple(plan.sources[kind][r] for r in rows)
+            doc = {**base, "kind": kind, "k": k, "frame": list(lay.frame), "frames": lay.frames,
+                   "samples_per_shard": lay.samples_per_shard, "level": lay.level,
+                   "samples": [[s.sample_id, s.path, s.start, s.stop, stats.of(s)]
+                               for s in samples]}
+            fp = hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
+            tasks.append(ShardTask(kind, k, str(root), str(group), str(_marker(stage, kind, k)),
+                                   lay, samples, str(calibration), solver, fp))
+    return tasks
+
+
+def _marker(stage: Path, kind: str, k: int) -> Path:
+    return stage / WORK / "shards" / f"{kind}-{k:06d}.json"
+
+
+def shard_done(task: ShardTask) -> bool:
+    """True when the shard's marker holds this task's fingerprint and its files are there."""
+    try:
+        doc = json.loads(Path(task.marker).read_text())
+    except (OSError, ValueError):
+        return False
+    if doc.get("fingerprint") != task.fingerprint:
+        return False
+    group = Path(task.group_dir)
+    sizes = doc.get("sizes", {})
+    for name in ARRAYS:
+        p = group / task.layout.shard_key(name, task.k)
+        if not p.is_file() or p.stat().st_size != sizes.get(name):
+            return False
+    return True
+
+
+# -- shard tasks (run in workers) ------------------------------------------------------------
+
+_CALIBRATIONS: dict[str, Any] = {}
+
+
+def _calibration(path: str) -> Any:
+    """The calibration, loaded once per worker process."""
+    from ..depth.calibration import load_calibration
+
+    if path not in _CALIBRATIONS:
+        _CALIBRATIONS.clear()
+        _CALIBRATIONS[path] = load_calibration(path)
+    return _CALIBRATIONS[path]
+
+
+def depth_and_contact(rgb: np.ndarray, cal: Any, solver: str) -> tuple[np.ndarray, np.ndarray]:
+    """Depth (mm, float32) and contact mask (bool) of RGB frames (T, H, W, 3), one per frame."""
+    from ..depth.mask import mask_from_images
+
+    contact = mask_from_images(rgb, cal.background)
+    try:
+        from ..depth.reconstruct import reconstruct
+    except ImportError:  # DEV: until reconstruct lands
+        from ..depth.poisson import integrate
+
+        g = cal.gradients(rgb)
+        depth = integrate(g[..., 0], g[..., 1], method=solver, mm_per_px=cal.mm_per_px,
+                          mask=contact if solver == "masked" else None)
+        return np.asarray(depth, np.float32), contact
+    depth = reconstruct(rgb, cal, solver=solver, mask=contact if solver == "masked" else None)
+    return np.asarray(depth, np.float32), contact
+
+
+def run_shard(task: ShardTask) -> ShardResult:
+    """Decode, make depth and contact, encode and write one shard of each array, then mark it."""
+    from ..recordings.media import read_frames
+    from .store import depth_to_int16, write_json, write_shard
+
+    marker = Path(task.marker)
+    marker.unlink(missing_ok=True)  # the shard files are about to change
+    lay, root = task.layout, Path(task.root)
+    want = lay.sample_shape("rgb") if lay.frames else (1, *lay.sample_shape("rgb"))
+    frames: list[np.ndarray] = []
+    bad: dict[str, str] = {}
+    for s in task.samples:
+        try:
+            x = read_frames(root / s.path, s.start, s.stop)
+        except VtsError as e:
+            bad[s.entry_id] = _relative(str(e), root)
+            continue
+        except Exception as e:  # OpenCV and decoders raise their own types
+            bad[s.entry_id] = f"{s.path}: cannot decode frames [{s.start}, {s.stop}) ({e})"
+            continue
+        if x.shape != want:
+            bad[s.entry_id] = (f"{s.path}: frames [{s.start}, {s.stop}) are "
+                               f"{'x'.join(map(str, x.shape))}, expected "
+                               f"{'x'.join(map(str, want))}")
+            continue
+        frames.append(x if lay.frames else x[0])
+    if bad:
+        return ShardResult(task.kind, task.k, bad=bad)
+    cal = _calibration(task.calibration)
+    rgb = np.stack(frames)
+    depth = np.empty(rgb.shape[:-1], np.int16)
+    contact = np.empty(rgb.shape[:-1], bool)
+    for i in range(len(rgb)):  # one sample at a time bounds the float32 working memory
+        d, c = depth_and_contact(rgb[i] if lay.frames else rgb[i:i + 1], cal, task.solver)
+        depth[i] = depth_to_int16(d if lay.frames else d[0])
+        contact[i] = c if lay.frames else c[0]
+    sizes = write_shard(Path(task.group_dir), lay, task.k,
+                        {"rgb": rgb, "depth": depth, "contact": contact})
+    marker.parent.mkdir(parents=True, exist_ok=True)
+    write_json(marker, {"fingerprint": task.fingerprint, "sizes": sizes})
+    return ShardResult(task.kind, task.k, frames=task.n_frames, nbytes=sum(sizes.values()))
+
+
+def _relative(text: str, root: Path) -> str:
+    """An error line with the recordings folder's prefix taken off its path."""
+    prefix = f"{root}{os.sep}"
+    return text[len(prefix):] if text.startswith(prefix) else text
+
+
+def _limit_threads() -> None:
+    """One OpenCV thread per worker: the workers already use every core."""
+    import cv2
+
+    cv2.setNumThreads(1)
+
+
+# -- executors ------------------------------------------------------------------------------
+
+_THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+@contextmanager
+def _one_thread_env() -> Iterator[None]:
+    """Children spawned inside the block start with one BLAS/OpenMP thread."""
+    old = {k: os.environ.get(k) for k in _THREAD_ENV}
+    os.environ.update(dict.fromkeys(_THREAD_ENV, "1"))
+    try:
+        yield
+    finally:
+        for k, v in old.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def _in_process(tasks: list[ShardTask]) -> Iterator[ShardResult]:
+    import cv2
+
+    threads = cv2.getNumThreads()
+    _limit_threads()
+    try:
+        for t in tasks:
+            yield run_shard(t)
+    finally:
+        cv2.setNumThreads(threads)
+
+
+def _process_pool(tasks: list[ShardTask], workers: int) -> Iterator[ShardResult]:
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    # Spawned, not forked: a fork copies OpenCV's and the progress bar's threads' locks.
+    ctx = multiprocessing.get_context("spawn")
+    with _one_thread_env():
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
+                                   initializer=_limit_threads)
+        futures = [pool.submit(run_shard, t) for t in tasks]
+    try:
+        for fut in as_completed(futures):
+            yield fut.result()
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _dask(tasks: list[ShardTask], scheduler: str, workers: int) -> Iterator[ShardResult]:
+    import logging
+
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise VtsError("--scheduler needs dask.distributed (pip install 'vtsbench[cluster]')"
+                       ) from None
+    cluster = None
+    try:
+        if scheduler == "local":
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=logging.ERROR)
+            client = Client(cluster)
+        else:
+            client = Client(scheduler, timeout="20s")
+    except (OSError, TimeoutError) as e:
+        if cluster is not None:
+            cluster.close()
+        raise VtsError(f"cannot reach the Dask scheduler at {scheduler} ({e})") from None
+    try:
+        futures = [client.submit(run_shard, t, key=f"vtsbench-{t.kind}-{t.k}-{t.fingerprint[:16]}",
+                                 pure=False) for t in tasks]
+        for fut in as_completed(futures):
+            yield fut.result()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def run_tasks(tasks: list[ShardTask], opts: BuildOptions) -> Iterator[ShardResult]:
+    """Shard results as they finish: in this process, a process pool, or a Dask cluster."""
+    if not tasks:
+        return iter(())
+    if opts.scheduler:
+        return _dask(tasks, opts.scheduler, opts.workers)
+    if opts.workers > 1 and len(tasks) > 1:
+        return _process_pool(tasks, min(opts.workers, len(tasks)))
+    return _in_process(tasks)
+
+
+# -- the partial folder ---------------------------------------------------------------------
+
+
+def partial_path(out: Path) -> Path:
+    """The hidden folder a build writes into: `.OUT.partial` beside OUT."""
+    return out.with_name(f".{out.name}.partial")
+
+
+@contextmanager
+def locked_stage(out: Path) -> Iterator[Path]:
+    """Create or reuse the partial folder, holding a lock so two builds never share it."""
+    stage = partial_path(out)
+    (stage / WORK).mkdir(parents=True, exist_ok=True)
+    fh = open(stage / WORK / "lock", "a+b")  # noqa: SIM115 (held for the whole block)
+    try:
+        try:
+            import fcntl
+
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except ImportError:  # no fcntl (Windows): no lock
+            pass
+        except OSError:
+            raise VtsError("another build is writing into this partial build", stage) from None
+        yield stage
+    finally:
+        fh.close()
+
+
+def remove_stale(stage: Path, plan: Plan) -> None:
+    """Delete shard files and markers the plan has no place for, and left-over temporaries."""
+    for kind in KINDS:
+        lay = plan.layouts[kind]
+        group = stage / "data" / f"{kind}.zarr"
+        keep = {group / lay.shard_key(n, k) for n in ARRAYS for k in range(lay.n_shards)}
+        for name in ARRAYS:
+            chunks = group / name / "c"
+            if chunks.is_dir():
+                for p in chunks.rglob("*"):
+                    if p.is_file() and p not in keep:
+                        p.unlink()
+        shards = stage / WORK / "shards"
+        if shards.is_dir():
+            for p in shards.glob(f"{kind}-*.json"):
+                if int(p.stem.split("-")[1]) >= lay.n_shards:
+                    p.unlink()
+    for p in stage.rglob(f"*{TMP_SUFFIX}"):
+        if p.name.startswith(".") and p.is_file():
+            p.unlink()
+
+
+# -- the build ------------------------------------------------------------------------------
+
+
+def _progress(enabled: bool) -> Any:
+    from contextlib import nullcontext
+
+    if not enabled:
+        return nullcontext(None)
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TaskProgressColumn,
+        TimeRemainingColumn,
+    )
+
+    return Progress("[progress.description]{task.description}", BarColumn(),
+                    MofNCompleteColumn(), TaskProgressColumn(), TimeRemainingColumn(),
+                    console=Console(stderr=True))
+
+
+def _check_options(opts: BuildOptions) -> None:
+    if opts.frames < 1:
+        raise VtsError(f"--frames must be at least 1, got {opts.frames}")
+    if opts.workers < 1:
+        raise VtsError(f"--workers must be at least 1, got {opts.workers}")
+    if opts.solver not in SOLVERS:
+        raise VtsError(f"--solver must be one of {', '.join(SOLVERS)}, got {opts.solver!r}")
+    if not 0 <= opts.compression_level <= 22:
+        raise VtsError(f"--compression-level must be 0 (none) to 22, got "
+                       f"{opts.compression_level}")
+    if not opts.shard_mb > 0:
+        raise VtsError(f"--shard-mb must be positive, got {opts.shard_mb}")
+    if opts.seed < 0:
+        raise VtsError(f"--seed must be >= 0, got {opts.seed}")
+    if not _semver(opts.version):
+        raise VtsError(f"--version must be a semantic version such as 1.0.0, got "
+                       f"{opts.version!r}")
+
+
+def _semver(text: str) -> bool:
+    import re
+
+    return re.fullmatch(r"(0|[1-9]\d*)\.(0|[1-9]\d*)\.(0|[1-9]\d*)(-[0-9A-Za-z.-]+)?"
+                        r"(\+[0-9A-Za-z.-]+)?", text) is not None
+
+
+def _load_checked_calibration(path: Path, manifest: Manifest, plan_sessions: set[str]) -> Any:
+    """The calibration, checked against the sensor and resolution of every used session."""
+    from ..depth.calibration import load_calibration
+
+    cal = None
+    for sid in sorted(plan_sessions):
+        ses = manifest.session(sid)
+        try:
+            cal = load_calibration(path, sensor=ses.sensor, resolution=ses.resolution)
+        except VtsError as e:
+            raise VtsError(f"session {sid}: {e}") from None
+    return cal if cal is not None else load_calibration(path)
+
+
+def build(recordings: str | Path, out: str | Path, opts: BuildOptions | None = None,
+          log: Callable[[str], None] | None = None) -> BuildResult:
+    """Build the dataset of a recordings folder into OUT (atomic: complete or absent)."""
+    from ..recordings.manifest import load_manifest
+
+    opts = opts or BuildOptions()
+    say = log or (lambda _msg: None)
+    t0 = time.perf_counter()
+    _check_options(opts)
+    root, out = Path(recordings).resolve(), Path(out).resolve()
+    if out.exists() and not opts.overwrite:
+        raise VtsError("already exists (use --overwrite to replace it)", out)
+    if out == root or root in out.parents:
+        raise VtsError("OUT must not be inside the recordings folder", out)
+    manifest = load_manifest(root)
+    cal_path = resolve_calibration(root, opts.calibration)
+    bad, warnings = screen_entries(root, manifest, opts.frames, max(2, opts.workers))
+    used = {e.session for e in manifest.entries if e.kind != "press" and e.id not in bad}
+    cal = _load_checked_calibration(cal_path, manifest, used)
+    cal_sha = sha256_file(cal_path)
+    level, res = opts.compression_level, cal.resolution
+    from .store import samples_per_shard
+
+    sps = {k: samples_per_shard(res, opts.frames if k == "slip" else None,
+                                int(opts.shard_mb * 2**20)) for k in KINDS}
+    if bad and not opts.skip_bad:
+        raise _bad_error(bad)
+    with locked_stage(out) as stage:
+        kept, built, first = 0, 0, True
+        while True:
+            plan = make_plan(root, manifest, bad, frames=opts.frames, resolution=res,
+                             mm_per_px=cal.mm_per_px, samples_per_shard=sps, level=level)
+            splits = _splits(plan, opts.seed)  # leaks fail the build before the long part
+            remove_stale(stage, plan)
+            tasks = shard_tasks(plan, root, stage, cal_path, cal_sha, opts.solver)
+            todo = [t for t in tasks if not shard_done(t)]
+            if first:
+                kept, first = len(tasks) - len(todo), False
+                if kept:
+                    say(f"resuming {partial_path(out).name}: {kept} of {len(tasks)} shards "
+                        "already done")
+            late = _run(todo, tasks, opts)
+            built += len(todo)
+            if not late:
+                break
+            if not opts.skip_bad:
+                raise _bad_error(late)
+            bad.update(late)  # plan again without them; shards before them stay valid
+        result = finish(stage, out, plan, splits, manifest=manifest, root=root, cal=cal,
+                        cal_sha=cal_sha, cal_path=cal_path, opts=opts)
+    shards = {k: plan.layouts[k].n_shards for k in KINDS}
+    return BuildResult(
+        out=out, samples={k: plan.layouts[k].n for k in KINDS},
+        frames={k: plan.layouts[k].n * (plan.layouts[k].frames or 1) for k in KINDS},
+        shards=shards, shards_built=built, shards_kept=kept, skipped=dict(sorted(bad.items())),
+        splits=[s.name for s in splits.splits], splits_skipped=dict(splits.skipped),
+        bytes_on_disk=result, seconds=time.perf_counter() - t0, warnings=warnings)
+
+
+def _bad_error(bad: dict[str, str]) -> VtsError:
+    eid = sorted(bad)[0]
+    more = (f" (and {len(bad) - 1} more bad entries)" if len(bad) > 1 else "")
+    return VtsError(f"bad recording {eid}: {bad[eid]}{more}; fix it or pass --skip-bad to "
+                    "leave it out")
+
+
+def _splits(plan: Plan, seed: int) -> Any:
+    """The split files of the plan's samples, leak-checked: a leak is a build error."""
+    from .splits import leak_check, make_splits
+
+    res = plan.layouts["static"].frame
+    report = make_splits(plan.samples, seed=seed, resolution=res)
+    for sp in report.splits:
+        leaks = leak_check(sp, plan.samples)
+        if leaks:
+            raise VtsError(f"split {sp.name} leaks: {leaks[0]}"
+                           + (f" (and {len(leaks) - 1} more)" if len(leaks) > 1 else ""))
+    return report
+
+
+def _run(todo: list[ShardTask], tasks: list[ShardTask], opts: BuildOptions) -> dict[str, str]:
+    """Run the shard tasks with progress bars; returns the bad entries found while decoding."""
+    late: dict[str, str] = {}
+    with _progress(opts.progress) as bar:
+        if bar is not None:
+            done = [t for t in tasks if t not in todo]
+            b_shards = bar.add_task("shards", total=len(tasks), completed=len(done))
+            b_frames = bar.add_task("frames", total=sum(t.n_frames for t in tasks),
+                                    completed=sum(t.n_frames for t in done))
+        results = run_tasks(todo, opts)
+        try:
+            for r in results:
+                if r.bad:
+                    late.update(r.bad)
+                    if not opts.skip_bad:
+                        break
+                elif bar is not None:
+                    bar.advance(b_shards)
+                    bar.advance(b_frames, r.frames)
+        finally:
+            close = getattr(results, "close", None)
+            if close is not None:
+                close()
+    return late
+
+
+# -- finishing: metadata, index, splits, card, report, checksums, rename -----------------------
+
+
+def hash_files(stage: Path, select: Callable[[str], bool] = lambda _rel: True
+                ) -> dict[str, str]:
+    """sha256 of the selected files under stage (relative '/' paths), never the build state."""
+    out = {}
+    for p in sorted(stage.rglob("*")):
+        rel = p.relative_to(stage).as_posix()
+        if p.is_file() and not rel.startswith(f"{WORK}/") and select(rel):
+            out[rel] = sha256_file(p)
+    return out
+
+
+def _checksummed(rel: str) -> bool:
+    """Files that dataset_sha256 covers."""
+    return rel.startswith(("data/", "index/", "meta/splits/"))
+
+
+def _umask_mode() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def build_params(manifest: Manifest, root: Path, cal_path: Path, opts: BuildOptions,
+                 solver_note: str) -> dict[str, Any]:
+    """The parameters recorded in info.json: what made the bytes, nothing about how it ran."""
+    from .store import DEPTH_MAX_MM, DEPTH_MIN_MM, DEPTH_SCALE_MM
+
+    return {
+        "recordings": {"name": manifest.name or root.name,
+                       "manifest_sha256": sha256_file(root / "recordings.json"),
+                       "entries": len(manifest.entries)},
+        "calibration_file": cal_path.name, "solver": opts.solver, "frames": opts.frames,
+        "compression_level": opts.compression_level, "shard_mb": opts.shard_mb,
+        "seed": opts.seed, "skip_bad": opts.skip_bad,
+        "depth": {"dtype": "int16", "scale_mm": DEPTH_SCALE_MM,
+                  "clipped_to_mm": [DEPTH_MIN_MM, DEPTH_MAX_MM], "method": solver_note},
+        "contact": "colour difference to the calibration background, cleaned "
+                   "(vtsbench.depth.mask.mask_from_images)",
+        "versions": _versions(),
+    }
+
+
+def finish(stage: Path, out: Path, plan: Plan, splits: Any, *, manifest: Manifest, root: Path,
+           cal: Any, cal_sha: str, cal_path: Path, opts: BuildOptions) -> dict[str, int]:
+    """Write everything but the shards, checksum it, and rename the stage to OUT."""
+    from .card import write_card, write_preview
+    from .index import write_index
+    from .schema import Calibration, Counts, DatasetInfo, ZarrSettings, dataset_checksum
+    from .splits import write_splits
+    from .store import write_file, write_metadata
+
+    for kind in KINDS:
+        write_metadata(stage / "data" / f"{kind}.zarr", plan.layouts[kind])
+        write_index(stage / "index" / f"{kind}.parquet", kind, plan.metas[kind])
+    split_dir = stage / "meta" / "splits"
+    names = {sp.name for sp in splits.splits}
+    if split_dir.is_dir():
+        for p in split_dir.glob("*.json"):
+            if p.stem not in names:
+                p.unlink()
+    split_sha = write_splits(split_dir, splits.splits)
+    mode = _umask_mode()
+    for name in split_sha:  # write_splits makes private (0600) temporaries
+        os.chmod(split_dir / f"{name}.json", mode)
+    lay = plan.layouts
+    info = DatasetInfo(
+        name=manifest.name or root.name, vtsbench_version=package_version(),
+        frames_per_sequence=opts.frames, resolution=lay["static"].frame,
+        objects=plan.objects, counts=Counts.of(plan.samples, splits.splits),
+        shapes={k: {n: lay[k].shape(n) for n in ARRAYS} for k in KINDS},
+        zarr=ZarrSettings({k: lay[k].samples_per_shard for k in KINDS},
+                          "zstd" if opts.compression_level else "none", opts.compression_level),
+        dataset_version=opts.version, created_by="vtsbench build",
+        calibration=Calibration(cal.sensor, cal.method, cal_sha), splits=split_sha,
+        build=build_params(manifest, root, cal_path, opts, f"{cal.method} + {opts.solver}"))
+    content = hash_files(stage, _checksummed)
+    info.dataset_sha256 = dataset_checksum(content)
+    write_preview(stage, plan)
+    report = {"built": {k: {"samples": lay[k].n, "frames": lay[k].n * (lay[k].frames or 1),
+                            "shards": lay[k].n_shards} for k in KINDS},
+              "skipped": [{"entry": e, "reason": r} for e, r in sorted(plan.bad.items())],
+              "splits_skipped": dict(sorted(splits.skipped.items()))}
+    (stage / "meta").mkdir(exist_ok=True)
+    write_file(stage / "meta" / "build_report.json",
+               (json.dumps(report, indent=1) + "\n").encode())
+    write_card(stage, info, plan)
+    info.files = {**content, **hash_files(
+        stage, lambda rel: not _checksummed(rel) and rel != "meta/info.json")}
+    write_file(stage / "meta" / "info.json", info.to_json().encode())
+    sizes: dict[str, int] = {}
+    for p in stage.rglob("*"):
+        rel = p.relative_to(stage).as_posix()
+        if p.is_file() and not rel.startswith(f"{WORK}/"):
+            top = rel.split("/")[0] if "/" in rel else "."
+            sizes[top] = sizes.get(top, 0) + p.stat().st_size
+    shutil.rmtree(stage / WORK)
+    if out.exists():
+        old = out.with_name(f".{out.name}.old")
+        shutil.rmtree(old, ignore_errors=True)
+        os.replace(out, old)
+        os.replace(stage, out)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(stage, out)
+    return dict(sorted(sizes.items()))

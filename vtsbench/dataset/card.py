@@ -1,0 +1,205 @@
+"""The dataset card (README.md) and the preview parquet files for the Hugging Face Hub.
+
+The card's YAML `configs` make `datasets.load_dataset(OUT)` read the slip index (the default
+config), the static index, and two small previews whose images are PNG bytes in the `Image()`
+feature, so the Hub viewer shows frames, depth and contact. Everything is derived from the
+plan and info, with fixed encoder settings: the same build gives the same bytes.
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .store import ARRAYS, KINDS, write_file
+
+if TYPE_CHECKING:
+    from .build import Plan
+    from .schema import DatasetInfo
+
+#: Samples shown per kind (evenly spaced rows): full-size PNGs, so few for slip (T frames).
+PREVIEW_SAMPLES = {"static": 8, "slip": 4}
+PNG_LEVEL = 6
+META_COLUMNS = {"static": ("sample_id", "row", "object", "class_idx", "session"),
+                "slip": ("sample_id", "row", "object", "class_idx", "session", "state",
+                         "direction")}
+
+
+def preview_rows(n: int, k: int) -> list[int]:
+    """Up to k evenly spaced rows of n, first and last included."""
+    if n <= 0:
+        return []
+    return sorted({round(float(x)) for x in np.linspace(0, n - 1, min(n, k))})
+
+
+def _png(img: np.ndarray) -> bytes:
+    """PNG bytes of an RGB uint8, grey uint8 or grey uint16 image (fixed settings)."""
+    import cv2
+
+    if img.ndim == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_RGB2BGR)
+    ok, buf = cv2.imencode(".png", img, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])
+    if not ok:
+        raise ValueError("cannot encode PNG")
+    return buf.tobytes()
+
+
+def _frame_pngs(name: str, frame: np.ndarray) -> bytes:
+    """One frame of an array as a PNG: RGB; depth in um (0.001 mm) as 16-bit, negatives 0;
+    contact as 0/255."""
+    if name == "rgb":
+        return _png(frame)
+    if name == "depth":
+        return _png(np.clip(frame.astype(np.int32), 0, 65535).astype(np.uint16))
+    return _png(frame.astype(np.uint8) * np.uint8(255))
+
+
+def preview_features(kind: str) -> Any:
+    """datasets.Features of a kind's preview table."""
+    import datasets as hf
+
+    meta = {"sample_id": hf.Value("string"), "row": hf.Value("int64"),
+            "object": hf.Value("string"), "class_idx": hf.Value("int32"),
+            "session": hf.Value("string")}
+    if kind == "slip":
+        meta |= {"state": hf.Value("string"), "direction": hf.Value("int32")}
+        return hf.Features({**meta, **{n: hf.List(hf.Image()) for n in ARRAYS}})
+    return hf.Features({**meta, **{n: hf.Image() for n in ARRAYS}})
+
+
+def preview_bytes(root: Path, plan: Plan, kind: str) -> bytes:
+    """The parquet file of a kind's preview, read back from the arrays just written."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from .store import open_group
+
+    rows = preview_rows(plan.layouts[kind].n, PREVIEW_SAMPLES[kind])
+    group = open_group(root, kind) if rows else None
+    records = []
+    for r in rows:
+        meta = plan.metas[kind][r].to_row()
+        rec: dict[str, Any] = {c: meta[c] for c in META_COLUMNS[kind]}
+        for name in ARRAYS:
+            x = group[name][r]
+            if kind == "slip":
+                rec[name] = [{"bytes": _frame_pngs(name, f), "path": None} for f in x]
+            else:
+                rec[name] = {"bytes": _frame_pngs(name, x), "path": None}
+        records.append(rec)
+    schema = preview_features(kind).arrow_schema
+    table = pa.Table.from_pylist(records, schema=schema)
+    buf = io.BytesIO()
+    pq.write_table(table, buf, compression="none", row_group_size=1)
+    return buf.getvalue()
+
+
+def write_preview(root: Path, plan: Plan) -> None:
+    """preview/static.parquet and preview/slip.parquet."""
+    (root / "preview").mkdir(exist_ok=True)
+    for kind in KINDS:
+        write_file(root / "preview" / f"{kind}.parquet", preview_bytes(root, plan, kind))
+
+
+def _configs(plan: Plan) -> str:
+    """The YAML `configs` list: the slip index is the default."""
+    lines = ["configs:"]
+    for kind in ("slip", "static"):
+        if not plan.layouts[kind].n:
+            continue
+        lines += [f"- config_name: {kind}", "  data_files:", "  - split: index",
+                  f"    path: index/{kind}.parquet"]
+        if kind == "slip" or not plan.layouts["slip"].n:
+            lines.append("  default: true")
+    for kind in ("slip", "static"):
+        if plan.layouts[kind].n:
+            lines += [f"- config_name: preview_{kind}", "  data_files:", "  - split: preview",
+                      f"    path: preview/{kind}.parquet"]
+    return "\n".join(lines)
+
+
+def _yaml_str(text: str) -> str:
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def card_text(info: DatasetInfo, plan: Plan) -> str:
+    """README.md: YAML header (configs) and a human description of the dataset."""
+    lay = plan.layouts
+    t = info.frames_per_sequence
+    h, w = info.resolution
+    head = "\n".join(["---", f"pretty_name: {_yaml_str(info.name)}",
+                      "tags:", "- tactile", "- visuo-tactile", "- rgb-d", "- vtsbench",
+                      _configs(plan), "---", ""])
+    rows = "\n".join(
+        f"| {k} | {lay[k].n} | {lay[k].n * (lay[k].frames or 1)} | "
+        f"{' x '.join(map(str, lay[k].shape('rgb')))} | {lay[k].samples_per_shard} |"
+        for k in KINDS)
+    splits = "\n".join(
+        f"| `{name}` | {', '.join(f'{p} {n}' for p, n in parts.items())} | "
+        f"`{info.splits[name][:16]}` |" for name, parts in info.counts.splits.items())
+    cal = info.calibration
+    comp = f"zstd level {info.zarr.level}" if info.zarr.level else "none"
+    return head + f"""
+# {info.name}
+
+Visuo-tactile RGB-D dataset built by `vtsbench build` (dataset version {info.dataset_version},
+format {info.format_version}). Every RGB frame ({h}x{w}) is paired one to one with a depth map
+generated by the sensor's calibration and a contact mask. Static samples are single frames;
+slip samples are sequences of {t} frames labelled static, press or slip, with a slip direction.
+
+| kind | samples | frames | rgb shape | samples per shard |
+|---|---:|---:|---|---:|
+{rows}
+
+Objects ({len(info.objects)}, `class_idx` is the index in this sorted list):
+{", ".join(info.objects) or "(none)"}.
+
+## Loading
+
+```python
+import vtsbench
+ds = vtsbench.load("path/to/this/folder")   # arrays, index, fixed splits
+train = ds.split("unseen_objects", "train")
+
+import datasets
+index = datasets.load_dataset("path/to/this/folder", "slip")          # the parquet index
+preview = datasets.load_dataset("path/to/this/folder", "preview_slip")  # a few samples, PNGs
+```
+
+## Arrays
+
+`data/static.zarr` and `data/slip.zarr` are Zarr v3 groups with `rgb` (uint8, RGB),
+`depth` (int16; value x {info.depth_scale_mm} = mm of indentation into the gel) and `contact`
+(bool), one sample per chunk, shards of whole samples, {comp} with a crc32c per chunk. Row r of
+each array is row r of `index/<kind>.parquet`.
+
+The preview tables hold PNGs: `rgb` as RGB, `depth` as 16-bit grey in micrometres (0.001 mm;
+negative depth shown as 0) and `contact` as 0/255.
+
+## Splits
+
+Made once at build time (seed {info.build.get("seed", 0)}), stored in `meta/splits/` and
+checked for leaks:
+
+| split | parts | sha256 |
+|---|---|---|
+{splits}
+
+## Provenance
+
+- calibration: sensor `{cal.sensor if cal else "-"}`, method `{cal.method if cal else "-"}`,
+  depth solver `{info.build.get("solver", "-")}`
+- vtsbench {info.vtsbench_version}; build parameters, per-file sha256 and the content checksum
+  in `meta/info.json`; skipped recordings in `meta/build_report.json`
+- dataset_sha256: `{info.dataset_sha256}`
+
+Check a copy with `vtsbench verify <folder>`; summarise it with `vtsbench info <folder>`.
+"""
+
+
+def write_card(root: Path, info: DatasetInfo, plan: Plan) -> None:
+    """Write README.md."""
+    write_file(root / "README.md", card_text(info, plan).encode("utf-8"))

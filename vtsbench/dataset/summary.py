@@ -1,0 +1,125 @@
+"""`vtsbench info`: what a built dataset holds, from info.json and the index, as rich tables.
+
+Counts per object (static samples and slip samples per state), per slip direction and per
+split part, sizes on disk per folder against the raw size (uint8 RGB + float32 depth), and
+the versions and checksum that identify the dataset. Reads no array data.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..labels import DIRECTION_NAMES, STATES
+from .schema import KINDS, DatasetInfo, load_info
+
+
+@dataclass
+class Summary:
+    """The numbers `vtsbench info` shows."""
+
+    info: DatasetInfo
+    by_object: dict[str, dict[str, int]] = field(default_factory=dict)
+    sizes: dict[str, int] = field(default_factory=dict)
+    raw_bytes: int = 0
+
+
+def summarise(root: str | Path) -> Summary:
+    """Read info.json and the indexes of a dataset folder (no arrays)."""
+    import pyarrow.parquet as pq
+
+    root = Path(root)
+    info = load_info(root)
+    by_object: dict[str, dict[str, int]] = {o: {} for o in info.objects}
+    for kind in KINDS:
+        path = root / "index" / f"{kind}.parquet"
+        if not path.is_file():
+            continue
+        t = pq.read_table(path, columns=["object", "state"] if kind == "slip" else ["object"])
+        d = t.to_pydict()
+        for i, obj in enumerate(d["object"]):
+            key = "static" if kind == "static" else f"slip:{d['state'][i] or 'unknown'}"
+            row = by_object.setdefault(obj, {})
+            row[key] = row.get(key, 0) + 1
+    sizes: dict[str, int] = {}
+    for p in root.rglob("*"):
+        if p.is_file():
+            rel = p.relative_to(root).parts
+            top = "/".join(rel[:2]) if rel[0] == "data" and len(rel) > 2 else rel[0]
+            sizes[top] = sizes.get(top, 0) + p.stat().st_size
+    raw = 0
+    for shapes in info.shapes.values():
+        n_rgb = _prod(shapes["rgb"])
+        raw += n_rgb + 4 * _prod(shapes["depth"])
+    return Summary(info, by_object, dict(sorted(sizes.items())), raw)
+
+
+def _prod(shape: Any) -> int:
+    out = 1
+    for v in shape:
+        out *= int(v)
+    return out
+
+
+def human(n: float) -> str:
+    """Bytes as B, KB, MB, GB (powers of 1000)."""
+    for unit in ("B", "KB", "MB", "GB"):
+        if abs(n) < 1000 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1000
+    return f"{n:.1f} TB"
+
+
+def render(s: Summary, console: Any) -> None:
+    """Print the summary as rich tables."""
+    from rich.table import Table
+
+    info = s.info
+    cal = info.calibration
+    console.print(f"[bold]{info.name}[/] {info.dataset_version} (format {info.format_version}, "
+                  f"vtsbench {info.vtsbench_version}); {info.resolution[0]}x"
+                  f"{info.resolution[1]} frames, T = {info.frames_per_sequence}; calibration "
+                  f"{cal.sensor + ' / ' + cal.method if cal else 'none'}, solver "
+                  f"{info.build.get('solver', '?')}", highlight=False)
+    console.print(f"dataset_sha256 {info.dataset_sha256}", highlight=False)
+    t = Table(title="samples per object", title_justify="left")
+    cols = ["static", *(f"slip:{x}" for x in STATES)]
+    if any("slip:unknown" in row for row in s.by_object.values()):
+        cols.append("slip:unknown")
+    for c in ("object", "class", *cols):
+        t.add_column(c, justify="left" if c == "object" else "right")
+    tot = dict.fromkeys(cols, 0)
+    for obj, row in sorted(s.by_object.items()):
+        t.add_row(obj, str(info.objects.index(obj)) if obj in info.objects else "?",
+                  *(str(row.get(c, 0)) for c in cols))
+        for c in cols:
+            tot[c] += row.get(c, 0)
+    t.add_row("[bold]total[/]", "", *(f"[bold]{v}[/]" for v in tot.values()))
+    console.print(t)
+    d = Table(title="slip directions (state slip)", title_justify="left")
+    dirs = info.counts.slip.directions
+    for k, name in enumerate(DIRECTION_NAMES):
+        d.add_column(f"{k} {name}", justify="right")
+    d.add_column("unknown", justify="right")
+    d.add_row(*(str(dirs.get(str(k), 0)) for k in range(len(DIRECTION_NAMES))),
+              str(dirs.get("unknown", 0)))
+    console.print(d)
+    sp = Table(title="splits", title_justify="left")
+    for c in ("split", "parts"):
+        sp.add_column(c)
+    for name, parts in info.counts.splits.items():
+        sp.add_row(name, ", ".join(f"{p} {n}" for p, n in parts.items()))
+    console.print(sp)
+    sz = Table(title="on disk", title_justify="left")
+    sz.add_column("folder")
+    sz.add_column("size", justify="right")
+    for k, v in s.sizes.items():
+        sz.add_row(k, human(v))
+    total = sum(s.sizes.values())
+    sz.add_row("[bold]total[/]", f"[bold]{human(total)}[/]")
+    data = sum(v for k, v in s.sizes.items() if k.startswith("data/"))
+    if s.raw_bytes:
+        sz.add_row("raw arrays (uint8 RGB + float32 depth)",
+                   f"{human(s.raw_bytes)} (data/ is {data / s.raw_bytes:.0%} of it)")
+    console.print(sz)
