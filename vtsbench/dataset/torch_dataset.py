@@ -109,18 +109,25 @@ class TorchView(Dataset):
 
     def _item(self, arrays: dict[str, np.ndarray], meta: dict[str, Any]
               ) -> tuple[Any, dict[str, Any]]:
-        chans = []
-        if "rgb" in self.arrays and self.modality != "depth":
-            rgb = torch.from_numpy(np.ascontiguousarray(arrays["rgb"]))
-            chans.append(rgb.movedim(-1, -3).contiguous().to(torch.float32).div_(255.0))
-        if self.modality != "rgb":
-            chans.append(torch.from_numpy(np.ascontiguousarray(arrays["depth"])).unsqueeze(-3))
-        x = chans[0] if len(chans) == 1 else torch.cat(chans, dim=-3)
+        x = self._tensor(arrays)
         if self.size is not None:
             x = resize(x, self.size)
         if self.transform is not None:
             x = self.transform(x)
         return x, self._target(arrays, meta)
+
+    def _tensor(self, arrays: dict[str, np.ndarray]) -> torch.Tensor:
+        """The input tensor, written once into its final buffer (uint8 -> [0, 1] in one pass:
+        full-size slip tensors are tens of MB and memory-bound)."""
+        if self.modality == "depth":
+            return torch.from_numpy(np.ascontiguousarray(arrays["depth"])).unsqueeze(-3)
+        rgb = torch.from_numpy(np.ascontiguousarray(arrays["rgb"])).movedim(-1, -3)
+        chans = 3 if self.modality == "rgb" else 4
+        out = torch.empty((*rgb.shape[:-3], chans, *rgb.shape[-2:]), dtype=torch.float32)
+        torch.mul(rgb, 1.0 / 255.0, out=out[..., :3, :, :])
+        if chans == 4:
+            out[..., 3, :, :] = torch.from_numpy(np.ascontiguousarray(arrays["depth"]))
+        return out
 
     def _target(self, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> dict[str, Any]:
         def num(v: float | None) -> float:
