@@ -1,0 +1,131 @@
+"""View.to_torch: tensors, resizing, frames, transforms, targets, and DataLoader workers."""
+
+from __future__ import annotations
+
+import pickle
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import vtsbench
+from vtsbench.dataset.loader import VtsDataset
+from vtsbench.errors import VtsError
+
+torch = pytest.importorskip("torch")
+from torch.utils.data import DataLoader  # noqa: E402
+
+from vtsbench.dataset.torch_dataset import frame_numbers  # noqa: E402
+
+pytest_plugins = ["loader_conftest"]
+
+
+@pytest.fixture(scope="module")
+def ds(vts_dataset: Path) -> VtsDataset:
+    return vtsbench.load(vts_dataset)
+
+
+def test_static_rgb_depth_rgbd(ds: VtsDataset) -> None:
+    view = ds.static
+    s = view[0]
+    h, w = ds.info.resolution
+    x, t = view.to_torch("rgb")[0]
+    assert x.shape == (3, h, w) and x.dtype == torch.float32
+    assert float(x.min()) >= 0.0 and float(x.max()) <= 1.0
+    np.testing.assert_allclose(x.numpy(), s["rgb"].transpose(2, 0, 1) / 255.0, rtol=1e-6)
+    d, _ = view.to_torch("depth")[0]
+    assert d.shape == (1, h, w)
+    np.testing.assert_array_equal(d[0].numpy(), s["depth"])
+    rgbd, _ = view.to_torch("rgbd")[0]
+    assert rgbd.shape == (4, h, w)
+    torch.testing.assert_close(rgbd[:3], x)
+    torch.testing.assert_close(rgbd[3:], d)
+    assert t == {"sample_id": s["sample_id"], "class_idx": s["class_idx"],
+                 "press_depth_mm": pytest.approx(s["press_depth_mm"], nan_ok=True)}
+
+
+def test_slip_frames_size_transform(ds: VtsDataset) -> None:
+    view = ds.slip
+    s = view[0]
+    t_all = ds.info.frames_per_sequence
+    seen = []
+
+    def transform(x: torch.Tensor) -> torch.Tensor:
+        seen.append(tuple(x.shape))
+        return x * 2
+
+    tv = view.to_torch("rgbd", size=(24, 32), frames=3, transform=transform)
+    x, target = tv[0]
+    assert x.shape == (3, 4, 24, 32) and seen == [(3, 4, 24, 32)]  # transform after resizing
+    picks = frame_numbers(t_all, 3)
+    assert picks[0] == 0 and picks[-1] == t_all - 1
+    plain, _ = view.to_torch("rgb", frames=3)[0]
+    np.testing.assert_allclose(plain.numpy(),
+                               s["rgb"][picks].transpose(0, 3, 1, 2) / 255.0, rtol=1e-6)
+    assert target["state_idx"] == s["state_idx"]
+    assert target["direction"] == (-1 if s["direction"] is None else s["direction"])
+    assert target["motion_mm"].shape == (2,)
+    assert frame_numbers(t_all, 1).tolist() == [t_all - 1]
+
+
+def test_resize_is_bilinear_of_the_frame(ds: VtsDataset) -> None:
+    s = ds.static[0]
+    h, w = ds.info.resolution
+    x, _ = ds.static.to_torch("depth", size=(h // 2, w // 2))[0]
+    ref = torch.nn.functional.interpolate(torch.from_numpy(s["depth"])[None, None],
+                                          size=(h // 2, w // 2), mode="bilinear",
+                                          align_corners=False, antialias=True)[0]
+    torch.testing.assert_close(x, ref)
+
+
+def test_target_arrays(ds: VtsDataset) -> None:
+    s = ds.slip[0]
+    _, t = ds.slip.to_torch("rgb", targets=("depth", "contact"))[0]
+    np.testing.assert_array_equal(t["depth"].numpy(), s["depth"])
+    np.testing.assert_array_equal(t["contact"].numpy(), s["contact"])
+    _, t = ds.slip.to_torch("rgb", size=(20, 30), frames=2, targets=("contact",))[0]
+    assert t["contact"].shape == (2, 20, 30) and t["contact"].dtype == torch.bool
+
+
+def test_errors(ds: VtsDataset) -> None:
+    for call, match in [
+        (lambda: ds.static.to_torch("thermal"), "unsupported modality 'thermal'"),
+        (lambda: ds.static.to_torch("rgb", frames=2), "slip sequences only"),
+        (lambda: ds.slip.to_torch("rgb", frames=99), "frames must be in 1.."),
+        (lambda: ds.slip.to_torch("rgb", size=(0, 4)), "size must be positive"),
+        (lambda: ds.slip.to_torch("rgb", targets=("labels",)), "unknown target array"),
+    ]:
+        with pytest.raises(VtsError, match=match) as e:
+            call()
+        assert "\n" not in str(e.value)
+
+
+def _collect(loader: DataLoader) -> tuple[list[str], torch.Tensor]:
+    ids: list[str] = []
+    xs = []
+    for x, t in loader:
+        ids += list(t["sample_id"])
+        xs.append(x)
+    return ids, torch.cat(xs)
+
+
+@pytest.mark.parametrize("context", ["fork", "spawn"])
+def test_dataloader_with_two_workers(ds: VtsDataset, context: str) -> None:
+    name = next(n for n in ds.splits if ds.split_file(n).kind == "slip")
+    part = max(ds.parts(name), key=lambda p: len(ds.split(name, p)))
+    view = ds.split(name, part)
+    tv = view.to_torch("rgbd", size=(24, 32), frames=2)
+    tv[0]  # arrays opened here must not travel to the workers
+    want_ids, want = _collect(DataLoader(tv, batch_size=2, num_workers=0))
+    loader = DataLoader(tv, batch_size=2, num_workers=2, multiprocessing_context=context,
+                        timeout=120)
+    ids, got = _collect(loader)
+    assert ids == want_ids == view.ids
+    torch.testing.assert_close(got, want)
+
+
+def test_torch_view_pickles_small(ds: VtsDataset) -> None:
+    tv = ds.static.to_torch("rgb")
+    tv[0]
+    back = pickle.loads(pickle.dumps(tv))
+    torch.testing.assert_close(back[0][0], tv[0][0])
