@@ -16,7 +16,7 @@ import os
 import shutil
 import time
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -490,11 +490,17 @@ def _process_pool(tasks: list[ShardTask], workers: int) -> Iterator[ShardResult]
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _dask(tasks: list[ShardTask], scheduler: str, workers: int) -> Iterator[ShardResult]:
+#: How long to wait for a Dask scheduler given by address.
+CONNECT_TIMEOUT = "10s"
+
+
+@contextmanager
+def dask_client(scheduler: str, workers: int) -> Iterator[Any]:
+    """A Dask client: on a LocalCluster of `workers` processes ('local') or a scheduler address."""
     import logging
 
     try:
-        from distributed import Client, LocalCluster, as_completed
+        from distributed import Client, LocalCluster
     except ImportError:
         raise VtsError("--scheduler needs dask.distributed (pip install 'vtsbench[cluster]')"
                        ) from None
@@ -505,28 +511,38 @@ def _dask(tasks: list[ShardTask], scheduler: str, workers: int) -> Iterator[Shar
                                    dashboard_address=None, silence_logs=logging.ERROR)
             client = Client(cluster)
         else:
-            client = Client(scheduler, timeout="20s")
-    except (OSError, TimeoutError) as e:
+            client = Client(scheduler, timeout=CONNECT_TIMEOUT)
+    except (OSError, TimeoutError, ValueError) as e:
         if cluster is not None:
             cluster.close()
         raise VtsError(f"cannot reach the Dask scheduler at {scheduler} ({e})") from None
     try:
-        futures = [client.submit(run_shard, t, key=f"vtsbench-{t.kind}-{t.k}-{t.fingerprint[:16]}",
-                                 pure=False) for t in tasks]
-        for fut in as_completed(futures):
-            yield fut.result()
+        yield client
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
 
 
-def run_tasks(tasks: list[ShardTask], opts: BuildOptions) -> Iterator[ShardResult]:
-    """Shard results as they finish: in this process, a process pool, or a Dask cluster."""
+def _dask(tasks: list[ShardTask], client: Any) -> Iterator[ShardResult]:
+    from distributed import as_completed
+
+    futures = [client.submit(run_shard, t, key=f"vtsbench-{t.kind}-{t.k}-{t.fingerprint[:16]}",
+                             pure=False) for t in tasks]
+    try:
+        for fut in as_completed(futures):
+            yield fut.result()
+    finally:
+        client.cancel([f for f in futures if not f.done()])
+
+
+def run_tasks(tasks: list[ShardTask], opts: BuildOptions, client: Any = None
+              ) -> Iterator[ShardResult]:
+    """Shard results as they finish: on a Dask client, in a process pool, or in this process."""
     if not tasks:
         return iter(())
-    if opts.scheduler:
-        return _dask(tasks, opts.scheduler, opts.workers)
+    if client is not None:
+        return _dask(tasks, client)
     if opts.workers > 1 and len(tasks) > 1:
         return _process_pool(tasks, min(opts.workers, len(tasks)))
     return _in_process(tasks)
@@ -671,7 +687,10 @@ def build(recordings: str | Path, out: str | Path, opts: BuildOptions | None = N
                                 int(opts.shard_mb * 2**20)) for k in KINDS}
     if bad and not opts.skip_bad:
         raise _bad_error(bad)
-    with locked_stage(out) as stage:
+    with ExitStack() as stack:
+        client = (stack.enter_context(dask_client(opts.scheduler, opts.workers))
+                  if opts.scheduler else None)
+        stage = stack.enter_context(locked_stage(out))
         kept, built, first = 0, 0, True
         while True:
             plan = make_plan(root, manifest, bad, frames=opts.frames, resolution=res,
@@ -685,8 +704,8 @@ def build(recordings: str | Path, out: str | Path, opts: BuildOptions | None = N
                 if kept:
                     say(f"resuming {partial_path(out).name}: {kept} of {len(tasks)} shards "
                         "already done")
-            late = _run(todo, tasks, opts)
-            built += len(todo)
+            late, written = _run(todo, tasks, opts, client)
+            built += written
             if not late:
                 break
             if not opts.skip_bad:
@@ -724,30 +743,33 @@ def _splits(plan: Plan, seed: int) -> Any:
     return report
 
 
-def _run(todo: list[ShardTask], tasks: list[ShardTask], opts: BuildOptions) -> dict[str, str]:
-    """Run the shard tasks with progress bars; returns the bad entries found while decoding."""
+def _run(todo: list[ShardTask], tasks: list[ShardTask], opts: BuildOptions,
+         client: Any = None) -> tuple[dict[str, str], int]:
+    """Run the shard tasks with progress bars; returns the bad entries found while decoding
+    (it stops at the first) and the number of shards written."""
     late: dict[str, str] = {}
+    written = 0
     with _progress(opts.progress) as bar:
         if bar is not None:
             done = [t for t in tasks if t not in todo]
             b_shards = bar.add_task("shards", total=len(tasks), completed=len(done))
             b_frames = bar.add_task("frames", total=sum(t.n_frames for t in tasks),
                                     completed=sum(t.n_frames for t in done))
-        results = run_tasks(todo, opts)
+        results = run_tasks(todo, opts, client)
         try:
             for r in results:
-                if r.bad:
+                if r.bad:  # stop: the rows after it move, so later shards are planned again
                     late.update(r.bad)
-                    if not opts.skip_bad:
-                        break
-                elif bar is not None:
+                    break
+                written += 1
+                if bar is not None:
                     bar.advance(b_shards)
                     bar.advance(b_frames, r.frames)
         finally:
             close = getattr(results, "close", None)
             if close is not None:
                 close()
-    return late
+    return late, written
 
 
 # -- finishing: metadata, index, splits, card, report, checksums, rename -----------------------

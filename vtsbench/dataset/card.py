@@ -57,17 +57,32 @@ def _frame_pngs(name: str, frame: np.ndarray) -> bytes:
     return _png(frame.astype(np.uint8) * np.uint8(255))
 
 
-def preview_features(kind: str) -> Any:
-    """datasets.Features of a kind's preview table."""
-    import datasets as hf
+def preview_schema(kind: str) -> Any:
+    """The arrow schema of a kind's preview, with the `huggingface` features metadata that makes
+    datasets decode the PNG columns as Image() (a list of images per slip sample).
 
-    meta = {"sample_id": hf.Value("string"), "row": hf.Value("int64"),
-            "object": hf.Value("string"), "class_idx": hf.Value("int32"),
-            "session": hf.Value("string")}
+    Written by hand, not through datasets.Features, so a build never imports datasets; the
+    `Sequence` spelling is read by datasets 3 and later.
+    """
+    import json
+
+    import pyarrow as pa
+
+    image = pa.struct([("bytes", pa.binary()), ("path", pa.string())])
+    cols = [("sample_id", pa.string()), ("row", pa.int64()), ("object", pa.string()),
+            ("class_idx", pa.int32()), ("session", pa.string())]
     if kind == "slip":
-        meta |= {"state": hf.Value("string"), "direction": hf.Value("int32")}
-        return hf.Features({**meta, **{n: hf.List(hf.Image()) for n in ARRAYS}})
-    return hf.Features({**meta, **{n: hf.Image() for n in ARRAYS}})
+        cols += [("state", pa.string()), ("direction", pa.int32())]
+    feats: dict[str, Any] = {n: {"dtype": str(t), "_type": "Value"} for n, t in cols}
+    for name in ARRAYS:
+        if kind == "slip":
+            cols.append((name, pa.list_(image)))
+            feats[name] = {"feature": {"_type": "Image"}, "_type": "Sequence"}
+        else:
+            cols.append((name, image))
+            feats[name] = {"_type": "Image"}
+    meta = {"huggingface": json.dumps({"info": {"features": feats}})}
+    return pa.schema(cols, metadata=meta)
 
 
 def preview_bytes(root: Path, plan: Plan, kind: str) -> bytes:
@@ -90,8 +105,7 @@ def preview_bytes(root: Path, plan: Plan, kind: str) -> bytes:
             else:
                 rec[name] = {"bytes": _frame_pngs(name, x), "path": None}
         records.append(rec)
-    schema = preview_features(kind).arrow_schema
-    table = pa.Table.from_pylist(records, schema=schema)
+    table = pa.Table.from_pylist(records, schema=preview_schema(kind))
     buf = io.BytesIO()
     pq.write_table(table, buf, compression="none", row_group_size=1)
     return buf.getvalue()

@@ -35,10 +35,13 @@ TMP_SUFFIX = ".tmp"
 
 
 def depth_to_int16(depth_mm: np.ndarray) -> np.ndarray:
-    """mm (float) -> int16 counts of DEPTH_SCALE_MM: rounded to nearest, clipped, NaN -> 0."""
-    counts = np.rint(np.nan_to_num(np.asarray(depth_mm, np.float64), nan=0.0,
-                                   posinf=DEPTH_MAX_MM, neginf=DEPTH_MIN_MM) / DEPTH_SCALE_MM)
-    return np.clip(counts, -32768, 32767).astype(np.int16)
+    """mm -> int16 counts of DEPTH_SCALE_MM: x 1000 in float32, clipped to the int16 range,
+    rounded to nearest (ties to even); NaN -> 0."""
+    counts = np.multiply(np.asarray(depth_mm, np.float32), np.float32(1 / DEPTH_SCALE_MM))
+    np.clip(counts, -32768, 32767, out=counts)
+    np.rint(counts, out=counts)
+    counts[np.isnan(counts)] = 0
+    return counts.astype(np.int16)
 
 
 def depth_to_mm(counts: np.ndarray) -> np.ndarray:
@@ -96,13 +99,14 @@ def _codecs(level: int) -> list[Any]:
     return ([ZstdCodec(level=level), Crc32cCodec()] if level > 0 else [Crc32cCodec()])
 
 
-def _create(store: Any, layout: Layout, n: int) -> dict[str, Any]:
-    """Create the group and its three arrays with n rows on a zarr store; returns the arrays."""
+def _create(store: Any, layout: Layout, n: int,
+            names: tuple[str, ...] = ARRAYS) -> dict[str, Any]:
+    """Create the group and its arrays with n rows on a zarr store; returns the arrays."""
     import zarr
 
     group = zarr.create_group(store, attributes=_group_attrs(layout), overwrite=True)
     out = {}
-    for name in ARRAYS:
+    for name in names:
         sample = layout.sample_shape(name)
         out[name] = group.create_array(
             name, shape=(n, *sample), dtype=DTYPES[name], chunks=(1, *sample),
@@ -167,7 +171,7 @@ def encode_shard(layout: Layout, name: str, block: np.ndarray) -> bytes:
         raise ValueError(f"{name}: shard block of shape {block.shape}, expected {want} with at "
                          f"most {layout.samples_per_shard} rows")
     docs: dict[str, Any] = {}
-    arr = _create(MemoryStore(docs), layout, len(block))[name]
+    arr = _create(MemoryStore(docs), layout, len(block), (name,))[name]
     arr[...] = block.astype(DTYPES[name], copy=False)
     return docs[layout.shard_key(name, 0)].to_bytes()
 
