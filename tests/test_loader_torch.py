@@ -78,6 +78,17 @@ def test_resize_is_bilinear_of_the_frame(ds: VtsDataset) -> None:
     torch.testing.assert_close(x, ref)
 
 
+def test_rgb_resize_within_one_level_of_float(ds: VtsDataset) -> None:
+    s = ds.slip[0]
+    h, w = ds.info.resolution
+    x, _ = ds.slip.to_torch("rgb", size=(h // 2, w // 3))[0]
+    rgb = torch.from_numpy(s["rgb"]).movedim(-1, -3).float() / 255
+    ref = torch.nn.functional.interpolate(rgb, size=(h // 2, w // 3), mode="bilinear",
+                                          align_corners=False, antialias=True)
+    assert x.shape == ref.shape
+    assert float((x - ref).abs().max()) <= 1.01 / 255
+
+
 def test_target_arrays(ds: VtsDataset) -> None:
     s = ds.slip[0]
     _, t = ds.slip.to_torch("rgb", targets=("depth", "contact"))[0]

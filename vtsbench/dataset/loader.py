@@ -206,9 +206,9 @@ def _read_runs(arr: Any, runs: list[tuple[int, int]], n: int,
                frames: np.ndarray | None) -> np.ndarray:
     """Rows of a zarr array given as contiguous runs [a, b): one call per run."""
     def get(a: int, b: int) -> np.ndarray:
-        if frames is None:
-            return arr[a:b]
-        return arr.get_orthogonal_selection((slice(a, b), frames))
+        # A chunk is a whole sample, so frames cost the same decoding either way; numpy picks
+        # them (zarr's orthogonal selection with an index array measured 25x slower).
+        return arr[a:b] if frames is None else arr[a:b][:, frames]
 
     if len(runs) == 1:
         return get(*runs[0])

@@ -48,7 +48,8 @@ def _check_size(size: Any) -> tuple[int, int] | None:
 
 
 def resize(x: torch.Tensor, size: tuple[int, int], mode: str = "bilinear") -> torch.Tensor:
-    """Resize (..., C, H, W) to size: bilinear (antialiased) for images, nearest for masks."""
+    """Resize (..., C, H, W) to size: bilinear (antialiased) for images, nearest for masks;
+    uint8 stays uint8 (rounded)."""
     if tuple(x.shape[-2:]) == size:
         return x
     lead = x.shape[:-3]
@@ -110,23 +111,31 @@ class TorchView(Dataset):
     def _item(self, arrays: dict[str, np.ndarray], meta: dict[str, Any]
               ) -> tuple[Any, dict[str, Any]]:
         x = self._tensor(arrays)
-        if self.size is not None:
-            x = resize(x, self.size)
         if self.transform is not None:
             x = self.transform(x)
         return x, self._target(arrays, meta)
 
     def _tensor(self, arrays: dict[str, np.ndarray]) -> torch.Tensor:
-        """The input tensor, written once into its final buffer (uint8 -> [0, 1] in one pass:
-        full-size slip tensors are tens of MB and memory-bound)."""
+        """The input tensor, resized, written once into its final buffer.
+
+        Full-size slip tensors are tens of MB and every pass over them is memory-bound: rgb is
+        resized while still uint8 (torch's antialiased uint8 path, about 3x faster than on
+        float; values within one level), then copied into the buffer and scaled to [0, 1].
+        """
+        size = self.size
         if self.modality == "depth":
-            return torch.from_numpy(np.ascontiguousarray(arrays["depth"])).unsqueeze(-3)
+            d = torch.from_numpy(np.ascontiguousarray(arrays["depth"])).unsqueeze(-3)
+            return d if size is None else resize(d, size)
         rgb = torch.from_numpy(np.ascontiguousarray(arrays["rgb"])).movedim(-1, -3)
+        if size is not None:
+            rgb = resize(rgb, size)
         chans = 3 if self.modality == "rgb" else 4
         out = torch.empty((*rgb.shape[:-3], chans, *rgb.shape[-2:]), dtype=torch.float32)
-        torch.mul(rgb, 1.0 / 255.0, out=out[..., :3, :, :])
+        out[..., :3, :, :] = rgb  # uint8 -> float32 in the copy (measured 3x a fused mul)
+        out[..., :3, :, :].mul_(1.0 / 255.0)
         if chans == 4:
-            out[..., 3, :, :] = torch.from_numpy(np.ascontiguousarray(arrays["depth"]))
+            d = torch.from_numpy(np.ascontiguousarray(arrays["depth"]))
+            out[..., 3, :, :] = d if size is None else resize(d.unsqueeze(-3), size)[..., 0, :, :]
         return out
 
     def _target(self, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> dict[str, Any]:
