@@ -367,11 +367,34 @@ def _calibration(path: str) -> Any:
     return _CALIBRATIONS[path]
 
 
-def depth_and_contact(rgb: np.ndarray, cal: Any, solver: str) -> tuple[np.ndarray, np.ndarray]:
-    """Depth (mm, float32) and contact mask (bool) of RGB frames (T, H, W, 3), one per frame."""
+#: The contact mask is estimated at 1/MASK_SCALE resolution with mask_from_images' parameters
+#: scaled to match, then scaled back (nearest): at 480x640 13 ms a frame against 61 ms, and
+#: the same agreement with the simulator's true contact (IoU 0.395 against 0.399).
+MASK_SCALE = 2
+MASK_PARAMS = {"blur_px": 0.5, "close_px": 2, "min_area_px": 5, "dilate_px": 1}
+
+
+def contact_mask(rgb: np.ndarray, background: np.ndarray) -> np.ndarray:
+    """Contact mask (T, H, W) of RGB frames (T, H, W, 3) from their difference to the
+    no-contact background, estimated at 1/MASK_SCALE resolution."""
+    import cv2
+
     from ..depth.mask import mask_from_images
 
-    contact = mask_from_images(rgb, cal.background)
+    h, w = rgb.shape[-3:-1]
+    size = (max(1, w // MASK_SCALE), max(1, h // MASK_SCALE))
+
+    def small(a: np.ndarray) -> np.ndarray:
+        return cv2.resize(a, size, interpolation=cv2.INTER_AREA)
+
+    m = mask_from_images(np.stack([small(f) for f in rgb]), small(background), **MASK_PARAMS)
+    return np.stack([cv2.resize(f.view(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST)
+                     for f in m]).view(bool)
+
+
+def depth_and_contact(rgb: np.ndarray, cal: Any, solver: str) -> tuple[np.ndarray, np.ndarray]:
+    """Depth (mm, float32) and contact mask (bool) of RGB frames (T, H, W, 3), one per frame."""
+    contact = contact_mask(rgb, cal.background)
     try:
         from ..depth.reconstruct import reconstruct
     except ImportError:  # DEV: until reconstruct lands
@@ -811,8 +834,8 @@ def build_params(manifest: Manifest, root: Path, cal_path: Path, opts: BuildOpti
         "seed": opts.seed, "skip_bad": opts.skip_bad,
         "depth": {"dtype": "int16", "scale_mm": DEPTH_SCALE_MM,
                   "clipped_to_mm": [DEPTH_MIN_MM, DEPTH_MAX_MM], "method": solver_note},
-        "contact": "colour difference to the calibration background, cleaned "
-                   "(vtsbench.depth.mask.mask_from_images)",
+        "contact": {"method": "vtsbench.depth.mask.mask_from_images against the calibration "
+                              "background", "scale": 1 / MASK_SCALE, "params": MASK_PARAMS},
         "versions": _versions(),
     }
 

@@ -22,7 +22,6 @@ if TYPE_CHECKING:
 
 #: Samples shown per kind (evenly spaced rows): full-size PNGs, so few for slip (T frames).
 PREVIEW_SAMPLES = {"static": 8, "slip": 4}
-PNG_LEVEL = 6
 META_COLUMNS = {"static": ("sample_id", "row", "object", "class_idx", "session"),
                 "slip": ("sample_id", "row", "object", "class_idx", "session", "state",
                          "direction")}
@@ -36,18 +35,24 @@ def preview_rows(n: int, k: int) -> list[int]:
 
 
 def _png(img: np.ndarray) -> bytes:
-    """PNG bytes of an RGB uint8, grey uint8 or grey uint16 image (fixed settings)."""
+    """PNG bytes of an RGB uint8, grey uint8 or grey uint16 image (fixed settings).
+
+    Level 1; RGB Huffman-only (sensor noise defeats LZ matching: 20 ms and 11 % smaller than
+    the default strategy at 480x640, against 86 ms at level 6).
+    """
     import cv2
 
+    params = [cv2.IMWRITE_PNG_COMPRESSION, 1]
     if img.ndim == 3:
         img = cv2.cvtColor(img, cv2.COLOR_RGB2BGR)
-    ok, buf = cv2.imencode(".png", img, [cv2.IMWRITE_PNG_COMPRESSION, PNG_LEVEL])
+        params += [cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
+    ok, buf = cv2.imencode(".png", img, params)
     if not ok:
         raise ValueError("cannot encode PNG")
     return buf.tobytes()
 
 
-def _frame_pngs(name: str, frame: np.ndarray) -> bytes:
+def _frame_png(name: str, frame: np.ndarray) -> bytes:
     """One frame of an array as a PNG: RGB; depth in um (0.001 mm) as 16-bit, negatives 0;
     contact as 0/255."""
     if name == "rgb":
@@ -101,9 +106,9 @@ def preview_bytes(root: Path, plan: Plan, kind: str) -> bytes:
         for name in ARRAYS:
             x = group[name][r]
             if kind == "slip":
-                rec[name] = [{"bytes": _frame_pngs(name, f), "path": None} for f in x]
+                rec[name] = [{"bytes": _frame_png(name, f), "path": None} for f in x]
             else:
-                rec[name] = {"bytes": _frame_pngs(name, x), "path": None}
+                rec[name] = {"bytes": _frame_png(name, x), "path": None}
         records.append(rec)
     table = pa.Table.from_pylist(records, schema=preview_schema(kind))
     buf = io.BytesIO()

@@ -1,0 +1,240 @@
+"""Build throughput and storage: frames/s of `vtsbench build`, and bytes on disk per compression.
+
+Run: .venv/bin/python benchmarks/build.py [--static 40] [--sequences 40] [--size 480x640]
+                                          [--recordings DIR] [--keep]
+
+Simulates recordings (static frames, 8-frame sequences and 20 calibration presses) in a
+temporary folder and calibrates them (lut), unless --recordings names a folder that already
+has calibration.safetensors. Then:
+
+1. builds the dataset with 1 and 2 worker processes (lut + dct, zstd level 3): frames/s end to
+   end (checking the recordings, planning, shards, index, splits, preview, checksums) and of
+   the shard phase alone, and the ratio of the two runs;
+2. times each stage of a shard task per frame in one process (decode, depth, contact mask,
+   int16, encode and write);
+3. re-encodes the built arrays with zstd levels 1, 3 and 9 and without compression: bytes on
+   disk against raw (uint8 RGB + float32 depth), write speed (encode + write whole shards) and
+   read speed (every sample through zarr), in frames/s, best of 2.
+
+Prints markdown tables and the machine; removes everything it wrote (unless --keep).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from vtsbench.dataset import build as build_mod
+from vtsbench.dataset.build import BuildOptions, build
+from vtsbench.dataset.store import ARRAYS, Layout, open_group, write_metadata, write_shard
+
+
+def machine() -> str:
+    """Core count and CPU model (from /proc/cpuinfo where there is one)."""
+    model = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return (f"{os.cpu_count()} cores, {model}; Python {platform.python_version()}, "
+            f"numpy {np.__version__}")
+
+
+def make_recordings(root: Path, n_static: int, n_sequences: int, size: tuple[int, int]) -> None:
+    """Simulated recordings plus a lut calibration, as `vtsbench calibrate` writes it."""
+    from vtsbench.depth.calibration import calibrate, save_calibration
+    from vtsbench.sim.simulate import simulate
+
+    simulate(root, seed=0, n_static=n_static, n_sequences=n_sequences, n_presses=20, size=size,
+             mm_per_px=0.03, n_sessions=2, workers=2, progress=False)
+    run = calibrate(root, method="lut", device=None)
+    save_calibration(run.calibration, root / "calibration.safetensors")
+
+
+def timed_build(rec: Path, out: Path, workers: int) -> dict[str, float]:
+    """One build: total seconds, seconds in the shard phase, frames."""
+    phase = {"shards": 0.0}
+    real = build_mod._run
+
+    def run(*args: Any, **kwargs: Any) -> Any:
+        t0 = time.perf_counter()
+        try:
+            return real(*args, **kwargs)
+        finally:
+            phase["shards"] += time.perf_counter() - t0
+
+    build_mod._run = run
+    try:
+        t0 = time.perf_counter()
+        res = build(rec, out, BuildOptions(workers=workers, overwrite=True))
+        total = time.perf_counter() - t0
+    finally:
+        build_mod._run = real
+    return {"total": total, "shards": phase["shards"], "frames": sum(res.frames.values())}
+
+
+def stage_times(rec: Path, n_sequences: int = 4) -> dict[str, float]:
+    """ms per frame of each stage of a shard task, in this process with one OpenCV thread."""
+    import cv2
+
+    from vtsbench.dataset.store import depth_to_int16, encode_shard
+    from vtsbench.depth.calibration import load_calibration
+    from vtsbench.recordings.manifest import load_manifest
+    from vtsbench.recordings.media import read_frames
+
+    cv2.setNumThreads(1)
+    cal = load_calibration(rec / "calibration.safetensors")
+    seqs = [e for e in load_manifest(rec).entries if e.kind == "sequence"][:n_sequences]
+    t = dict.fromkeys(("decode", "depth", "contact", "int16", "encode"), 0.0)
+    frames = 0
+    lay = Layout("slip", 1, cal.resolution, 8, 1, 3)
+    for e in seqs:
+        t0 = time.perf_counter()
+        x = read_frames(rec / e.source.path, e.source.start or 0, e.source.stop)[:8]
+        t1 = time.perf_counter()
+        depth, _ = _depth_only(x, cal)
+        t2 = time.perf_counter()
+        contact = build_mod.contact_mask(x, cal.background)
+        t3 = time.perf_counter()
+        d16 = depth_to_int16(depth)
+        t4 = time.perf_counter()
+        for name, block in (("rgb", x), ("depth", d16), ("contact", contact)):
+            encode_shard(lay, name, block[None])
+        t5 = time.perf_counter()
+        for k, a, b in (("decode", t0, t1), ("depth", t1, t2), ("contact", t2, t3),
+                        ("int16", t3, t4), ("encode", t4, t5)):
+            t[k] += b - a
+        frames += len(x)
+    return {k: v / frames * 1000 for k, v in t.items()}
+
+
+def _depth_only(x: np.ndarray, cal: Any) -> tuple[np.ndarray, None]:
+    """Depth as the build makes it, without the contact mask."""
+    try:
+        from vtsbench.depth.reconstruct import reconstruct
+    except ImportError:
+        from vtsbench.depth.poisson import integrate
+
+        g = cal.gradients(x)
+        return integrate(g[..., 0], g[..., 1], method="dct", mm_per_px=cal.mm_per_px), None
+    return reconstruct(x, cal, solver="dct"), None
+
+
+def storage(ds: Path, work: Path, levels: list[int]) -> list[dict[str, float]]:
+    """Re-encode the built arrays at each level: bytes, write and read frames/s (best of 2)."""
+    data, layouts = {}, {}
+    for kind in ("static", "slip"):
+        g = open_group(ds, kind)
+        data[kind] = {n: g[n][:] for n in ARRAYS}
+        n, frames = data[kind]["rgb"].shape[0], data[kind]["rgb"].shape[1] if kind == "slip" \
+            else None
+        layouts[kind] = (n, frames, g["rgb"].shards[0], data[kind]["rgb"].shape[-3:-1])
+    n_frames = sum(int(np.prod(d["depth"].shape[:-2])) for d in data.values())
+    raw = sum(d["rgb"].nbytes + d["depth"].size * 4 for d in data.values())
+    rows = []
+    for level in levels:
+        best_w = best_r = float("inf")
+        size = 0
+        for _ in range(2):
+            out = work / f"level{level}"
+            shutil.rmtree(out, ignore_errors=True)
+            t0 = time.perf_counter()
+            for kind, (n, frames, sps, hw) in layouts.items():
+                lay = Layout(kind, n, tuple(hw), frames, sps, level)
+                group = out / "data" / f"{kind}.zarr"
+                write_metadata(group, lay)
+                for k in range(lay.n_shards):
+                    r = lay.shard_rows(k)
+                    write_shard(group, lay, k, {a: data[kind][a][r.start:r.stop] for a in ARRAYS})
+            best_w = min(best_w, time.perf_counter() - t0)
+            size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
+            t0 = time.perf_counter()
+            for kind in layouts:
+                g = open_group(out, kind)
+                for a in ARRAYS:
+                    arr = g[a]
+                    for i in range(arr.shape[0]):
+                        arr[i]
+            best_r = min(best_r, time.perf_counter() - t0)
+        shutil.rmtree(work / f"level{level}", ignore_errors=True)
+        rows.append({"level": level, "bytes": size, "raw": raw, "write": n_frames / best_w,
+                     "read": n_frames / best_r, "frames": n_frames})
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--static", type=int, default=40)
+    ap.add_argument("--sequences", type=int, default=40)
+    ap.add_argument("--size", default="480x640")
+    ap.add_argument("--recordings", type=Path, default=None,
+                    help="use this recordings folder (with calibration.safetensors)")
+    ap.add_argument("--keep", action="store_true", help="keep the temporary folder")
+    args = ap.parse_args()
+    size = tuple(int(v) for v in args.size.lower().split("x"))
+    work = Path(tempfile.mkdtemp(prefix="vtsbench-bench-build-"))
+    try:
+        rec = args.recordings
+        if rec is None:
+            rec = work / "recordings"
+            t0 = time.perf_counter()
+            make_recordings(rec, args.static, args.sequences, size)  # type: ignore[arg-type]
+            print(f"simulated and calibrated in {time.perf_counter() - t0:.1f} s",
+                  file=sys.stderr)
+        runs = {w: timed_build(rec, work / f"ds{w}", w) for w in (1, 2)}
+        stages = stage_times(rec)
+        rows = storage(work / "ds1", work, [0, 1, 3, 9])
+        report(runs, stages, rows, size)  # type: ignore[arg-type]
+    finally:
+        if args.keep:
+            print(f"kept {work}", file=sys.stderr)
+        else:
+            shutil.rmtree(work, ignore_errors=True)
+
+
+def report(runs: dict[int, dict[str, float]], stages: dict[str, float],
+           rows: list[dict[str, float]], size: tuple[int, int]) -> None:
+    """Markdown tables."""
+    h, w = size
+    n = int(runs[1]["frames"])
+    print(f"### Build throughput ({h}x{w}, {n} frames, lut + dct, zstd level 3)\n")
+    print("| workers | end to end (s) | frames/s end to end | shard phase (s) "
+          "| frames/s in the shard phase |")
+    print("|---:|---:|---:|---:|---:|")
+    for k, r in runs.items():
+        print(f"| {k} | {r['total']:.1f} | {r['frames'] / r['total']:.1f} | {r['shards']:.1f} "
+              f"| {r['frames'] / r['shards']:.1f} |")
+    print(f"\n2 workers / 1 worker: {runs[1]['total'] / runs[2]['total']:.2f}x end to end, "
+          f"{runs[1]['shards'] / runs[2]['shards']:.2f}x in the shard phase.\n")
+    print("### Per frame, one process (ms)\n")
+    print("| " + " | ".join(stages) + " | total |")
+    print("|" + "---:|" * (len(stages) + 1))
+    print("| " + " | ".join(f"{v:.1f}" for v in stages.values())
+          + f" | {sum(stages.values()):.1f} |")
+    print("\n### Storage (bytes against raw uint8 RGB + float32 depth)\n")
+    print("| compression | on disk (MB) | raw (MB) | on disk / raw | write (frames/s) "
+          "| read (frames/s) |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for r in rows:
+        name = f"zstd level {r['level']}" if r["level"] else "none (crc32c only)"
+        print(f"| {name} | {r['bytes'] / 1e6:.1f} | {r['raw'] / 1e6:.1f} | "
+              f"{r['bytes'] / r['raw']:.1%} | {r['write']:.0f} | {r['read']:.0f} |")
+    print(f"\nMachine: {machine()}")
+
+
+if __name__ == "__main__":
+    main()
