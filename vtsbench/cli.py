@@ -224,6 +224,8 @@ def _print_build(res) -> None:
     from .dataset.summary import human
 
     console = Console(highlight=False)
+    for w in res.warnings:
+        console.print(f"[yellow]warning[/] {w}", soft_wrap=True)
     for eid, why in res.skipped.items():
         console.print(f"[yellow]skipped[/] {eid}: {why}", soft_wrap=True)
     for name, why in res.splits_skipped.items():

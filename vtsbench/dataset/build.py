@@ -171,7 +171,9 @@ def screen_entries(root: Path, manifest: Manifest, frames: int,
     for p in report.problems:
         eid, sep, rest = p.partition(": ")
         if sep and eid in kinds:
-            if kinds[eid] != "press":  # presses are not samples (they made the calibration)
+            if rest.endswith("truth file not found"):  # the build does not read truth files
+                warnings.append(p)
+            elif kinds[eid] != "press":  # presses are not samples (they made the calibration)
                 per.setdefault(eid, []).append(rest)
         elif p.startswith("session "):
             warnings.append(p)
@@ -313,7 +315,7 @@ def shard_tasks(plan: Plan, root: Path, stage: Path, calibration: Path, cal_sha:
     """One task per shard of each kind, with the fingerprint of everything its bytes use."""
     stats = SourceStats(root)
     base = {"version": FINGERPRINT_VERSION, "versions": _versions(), "calibration": cal_sha,
-            "solver": solver}
+            "solver": solver, "mask": [MASK_SCALE, MASK_PARAMS]}
     tasks = []
     for kind in KINDS:
         lay = plan.layouts[kind]
@@ -444,6 +446,7 @@ def run_shard(task: ShardTask) -> ShardResult:
         d, c = depth_and_contact(rgb[i] if lay.frames else rgb[i:i + 1], cal, task.solver)
         depth[i] = depth_to_int16(d if lay.frames else d[0])
         contact[i] = c if lay.frames else c[0]
+    _check_parent()
     sizes = write_shard(Path(task.group_dir), lay, task.k,
                         {"rgb": rgb, "depth": depth, "contact": contact})
     marker.parent.mkdir(parents=True, exist_ok=True)
@@ -462,6 +465,22 @@ def _limit_threads() -> None:
     import cv2
 
     cv2.setNumThreads(1)
+
+
+#: The build process of a pool worker: a worker orphaned by a killed build writes nothing more,
+#: so it cannot overwrite the shards of the next build in the same partial folder.
+_PARENT: int | None = None
+
+
+def _pool_worker_init(parent: int) -> None:
+    global _PARENT
+    _PARENT = parent
+    _limit_threads()
+
+
+def _check_parent() -> None:
+    if _PARENT is not None and os.getppid() != _PARENT:
+        raise SystemExit("vtsbench build: the build process is gone; this worker stops")
 
 
 # -- executors ------------------------------------------------------------------------------
@@ -504,7 +523,7 @@ def _process_pool(tasks: list[ShardTask], workers: int) -> Iterator[ShardResult]
     ctx = multiprocessing.get_context("spawn")
     with _one_thread_env():
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
-                                   initializer=_limit_threads)
+                                   initializer=_pool_worker_init, initargs=(os.getpid(),))
         futures = [pool.submit(run_shard, t) for t in tasks]
     try:
         for fut in as_completed(futures):
