@@ -228,8 +228,8 @@ def _print_build(res) -> None:
         console.print(f"[yellow]warning[/] {w}", soft_wrap=True)
     for eid, why in res.skipped.items():
         console.print(f"[yellow]skipped[/] {eid}: {why}", soft_wrap=True)
-    for name, why in res.splits_skipped.items():
-        console.print(f"[yellow]split not made[/] {name}: {why}", soft_wrap=True)
+    for why in res.splits_skipped.values():
+        console.print(f"[yellow]split not made[/] {why}", soft_wrap=True)
     t = Table(title=f"built {res.out}", title_justify="left")
     for c in ("kind", "samples", "frames", "shards"):
         t.add_column(c, justify="left" if c == "kind" else "right")

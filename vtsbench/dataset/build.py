@@ -737,6 +737,9 @@ def build(recordings: str | Path, out: str | Path, opts: BuildOptions | None = N
         while True:
             plan = make_plan(root, manifest, bad, frames=opts.frames, resolution=res,
                              mm_per_px=cal.mm_per_px, samples_per_shard=sps, level=level)
+            if not plan.samples:
+                raise VtsError("nothing to build: no usable static or sequence entries "
+                               "(calibration presses are not samples)", root)
             splits = _splits(plan, opts.seed)  # leaks fail the build before the long part
             remove_stale(stage, plan)
             tasks = shard_tasks(plan, root, stage, cal_path, cal_sha, opts.solver)
