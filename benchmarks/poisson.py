@@ -56,6 +56,8 @@ def machine() -> str:
             text += f", CUDA {torch.cuda.get_device_name(0)}"
     except ImportError:
         text += ", no torch"
+    if hasattr(os, "getloadavg"):
+        text += f"; load average {os.getloadavg()[0]:.1f} at start"
     return text
 
 
@@ -138,7 +140,7 @@ def speed_table(size: tuple[int, int], mm: float, repeats: int) -> list[str]:
                 q = np.repeat(q1[None], batch, 0).astype(dtype)
                 m = np.broadcast_to(mask, p.shape) if mname else None
                 kw = {"mask": m} if mname else {}
-                reps = 1 if (mname and batch == 8) else repeats
+                reps = min(repeats, 2) if (mname and batch == 8) else repeats
                 t = best_time(lambda p=p, q=q, kw=kw, method=method: integrate(
                     p, q, method=method, mm_per_px=mm, **kw), reps)
                 row = [method, mname or "-", np.dtype(dtype).name, str(batch), f"{batch / t:.1f}"]
