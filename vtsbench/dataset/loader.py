@@ -117,6 +117,7 @@ class KindStore:
     def _reset(self) -> None:
         self._pid: int | None = None
         self._group: Any = None
+        self._arrays: dict[str, Any] = {}
         self._cols: dict[str, list[Any]] | None = None
         self._pos_of: dict[str, int] | None = None
 
@@ -144,12 +145,14 @@ class KindStore:
     def array(self, name: str) -> Any:
         """A zarr array of this kind, opened on first use in this process."""
         if self._pid != os.getpid():
-            self._pid, self._group = os.getpid(), None
-        if self._group is None:
-            group = store.open_group(self.loc.url, self.kind, self.loc.storage_options)
-            strict = StrictStore(group.store, store.group_location(self.loc.url, self.kind))
-            self._group = zarr.open_group(strict, mode="r", use_consolidated=True)
-        return self._group[name]
+            self._pid, self._group, self._arrays = os.getpid(), None, {}
+        if name not in self._arrays:
+            if self._group is None:
+                group = store.open_group(self.loc.url, self.kind, self.loc.storage_options)
+                strict = StrictStore(group.store, store.group_location(self.loc.url, self.kind))
+                self._group = zarr.open_group(strict, mode="r", use_consolidated=True)
+            self._arrays[name] = self._group[name]
+        return self._arrays[name]
 
     def sample_nbytes(self, names: Sequence[str]) -> int:
         """Decoded bytes of one sample's arrays (depth as float32)."""
