@@ -123,15 +123,10 @@ def stage_times(rec: Path, n_sequences: int = 4) -> dict[str, float]:
 
 
 def _depth_only(x: np.ndarray, cal: Any) -> tuple[np.ndarray, None]:
-    """Depth as the build makes it, without the contact mask."""
-    try:
-        from vtsbench.depth.reconstruct import reconstruct
-    except ImportError:
-        from vtsbench.depth.poisson import integrate
+    """Depth as the build makes it (lut + dct, numpy), without the contact mask."""
+    from vtsbench.depth.reconstruct import reconstruct
 
-        g = cal.gradients(x)
-        return integrate(g[..., 0], g[..., 1], method="dct", mm_per_px=cal.mm_per_px), None
-    return reconstruct(x, cal, solver="dct"), None
+    return reconstruct(x, cal, solver="dct", device=None), None
 
 
 def storage(ds: Path, work: Path, levels: list[int]) -> list[dict[str, float]]:

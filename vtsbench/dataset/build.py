@@ -396,17 +396,11 @@ def contact_mask(rgb: np.ndarray, background: np.ndarray) -> np.ndarray:
 
 def depth_and_contact(rgb: np.ndarray, cal: Any, solver: str) -> tuple[np.ndarray, np.ndarray]:
     """Depth (mm, float32) and contact mask (bool) of RGB frames (T, H, W, 3), one per frame."""
-    contact = contact_mask(rgb, cal.background)
-    try:
-        from ..depth.reconstruct import reconstruct
-    except ImportError:  # DEV: until reconstruct lands
-        from ..depth.poisson import integrate
+    from ..depth.reconstruct import reconstruct
 
-        g = cal.gradients(rgb)
-        depth = integrate(g[..., 0], g[..., 1], method=solver, mm_per_px=cal.mm_per_px,
-                          mask=contact if solver == "masked" else None)
-        return np.asarray(depth, np.float32), contact
-    depth = reconstruct(rgb, cal, solver=solver, mask=contact if solver == "masked" else None)
+    contact = contact_mask(rgb, cal.background)
+    depth = reconstruct(rgb, cal, solver=solver, mask=contact if solver == "masked" else None,
+                        device=None)
     return np.asarray(depth, np.float32), contact
 
 
