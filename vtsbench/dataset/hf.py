@@ -53,7 +53,7 @@ def to_hf(view: View, arrays: Sequence[str] = ARRAYS, *, writer_batch_size: int 
     feats = features(view, arrays)
     if not len(view):
         return datasets.Dataset.from_dict({k: [] for k in feats}, features=feats)
-    per = max(1, view._kind.sample_nbytes(arrays)) if arrays else 1
+    per = max(1, view.nbytes(arrays)) if arrays else 1
     batch = max(1, min(writer_batch_size, ITER_BYTES // per))
     return datasets.Dataset.from_generator(
         _rows, features=feats, writer_batch_size=writer_batch_size,

@@ -276,6 +276,10 @@ class View:
         """The index rows of this view (pyarrow Table)."""
         return self._kind.table.take(self._pos)
 
+    def nbytes(self, arrays: Sequence[str] = ARRAYS) -> int:
+        """Decoded bytes of one sample's arrays (depth as float32 mm)."""
+        return self._kind.sample_nbytes(arrays)
+
     def _positions(self, items: Any) -> np.ndarray:
         """View positions (int, slice, sequence) -> index positions; out of range is an error."""
         n = len(self)
