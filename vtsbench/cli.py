@@ -279,6 +279,112 @@ def verify(
         raise typer.Exit(1)
 
 
+@app.command()
+def calibrate(
+    recordings: Annotated[Path, typer.Argument(help="Recordings folder with ball presses.")],
+    out: Annotated[Path, typer.Option("--out", help="Calibration file to write (.safetensors).")],
+    method: Annotated[str, typer.Option(
+        help="lut (fast lookup), poly (polynomial) or mlp (small network, needs torch).")
+    ] = "poly",
+    holdout: Annotated[int | None, typer.Option(
+        min=0, help="Presses kept out of training and scored (default: a fifth).")] = None,
+    seed: Annotated[int, typer.Option(help="Seed of the hold-out choice, sampling, mlp.")] = 0,
+    mm_per_px: Annotated[float | None, typer.Option(
+        help="Scale in mm per pixel (default: from the recordings).")] = None,
+    background: Annotated[Path | None, typer.Option(
+        help="No-contact image (default: the sessions' backgrounds).")] = None,
+    estimate_background: Annotated[bool, typer.Option(
+        help="Use the per-pixel median of the press frames as the background.")] = False,
+    report: Annotated[Path | None, typer.Option(
+        help="Report folder (default: FILE.report beside the calibration).")] = None,
+    solver: Annotated[str, typer.Option(
+        help="Poisson solver scoring the held-out presses: dct, dst or masked.")] = "dct",
+    device: Annotated[str, typer.Option(
+        help="mlp training device: auto (CUDA when present), cpu or cuda.")] = "auto",
+    bins: Annotated[int | None, typer.Option(help="lut: colour bins per channel (32).")] = None,
+    cells: Annotated[int | None, typer.Option(
+        help="lut: spatial cells per side (2).")] = None,
+    degree: Annotated[int | None, typer.Option(help="poly: colour degree (3).")] = None,
+    pos_degree: Annotated[int | None, typer.Option(
+        help="poly, mlp: degree of the position polynomial (2).")] = None,
+    width: Annotated[int | None, typer.Option(help="mlp: units per hidden layer (64).")] = None,
+    depth: Annotated[int | None, typer.Option(help="mlp: hidden layers (3).")] = None,
+    epochs: Annotated[int | None, typer.Option(help="mlp: training epochs (40).")] = None,
+) -> None:
+    """Fit a colour-to-gradient calibration from ball presses, score held-out presses.
+
+    Example: [bold]vtsbench calibrate rec --out sensor.safetensors --method mlp --holdout 6[/]
+    """
+    import time
+
+    def work() -> None:
+        from .depth.calibration import calibrate as run_calibrate
+        from .depth.calibration import save_calibration
+        from .depth.report import write_report
+        from .errors import VtsError
+
+        given = {"bins": bins, "cells": cells, "degree": degree, "pos_degree": pos_degree,
+                 "width": width, "depth": depth, "epochs": epochs}
+        allowed = {"lut": {"bins", "cells"}, "poly": {"degree", "pos_degree"},
+                   "mlp": {"width", "depth", "epochs", "pos_degree"}}.get(method, set())
+        wrong = sorted(k for k, v in given.items() if v is not None and k not in allowed)
+        if wrong:
+            opts = ", ".join("--" + k.replace("_", "-") for k in wrong)
+            raise VtsError(f"{opts} does not apply to --method {method}")
+        if solver not in ("dct", "dst", "masked"):
+            raise VtsError(f"unknown solver {solver!r} (use dct, dst or masked)")
+        t0 = time.perf_counter()
+        run = run_calibrate(recordings, method=method, holdout=holdout, seed=seed,
+                            mm_per_px=mm_per_px, background=background,
+                            estimate_background=estimate_background, solver=solver,
+                            device=device, options={k: v for k, v in given.items()
+                                                    if v is not None},
+                            log=lambda m: typer.echo(m, err=m.startswith("warning")))
+        save_calibration(run.calibration, out)
+        folder = report if report is not None else out.with_name(out.name + ".report")
+        png, _ = write_report(run, folder)
+        fit = run.calibration.fit
+        for r in run.held_out:
+            e = r.errors
+            typer.echo(f"  {r.press.id}: gradient RMSE {e['gradient_rmse']:.4f}, plane-aligned "
+                       f"RMSE {e['plane_aligned_rmse_mm']:.4f} mm, contact RMSE "
+                       f"{e['contact_rmse_mm']:.4f} mm, peak error "
+                       f"{e['peak_depth_error_mm']:+.4f} mm ({r.reference})")
+        if run.held_out:
+            m = fit["holdout_mean"]
+            typer.echo(f"held-out mean over {len(run.held_out)} presses: plane-aligned RMSE "
+                       f"{m['plane_aligned_rmse_mm']:.4f} mm, gradient RMSE "
+                       f"{m['gradient_rmse']:.4f}")
+        typer.echo(f"wrote {out} ({method}, {run.calibration.n_presses} training presses) and "
+                   f"{png} in {time.perf_counter() - t0:.1f} s")
+
+    _run(work)
+
+
+@app.command()
+def depth(
+    images: Annotated[Path, typer.Argument(
+        help="An image file, a folder of images or a video.")],
+    calibration: Annotated[Path, typer.Option(help="Calibration file from `vtsbench calibrate`.")],
+    solver: Annotated[str, typer.Option(help="Poisson solver: dct, dst or masked.")] = "dct",
+    out: Annotated[Path, typer.Option(
+        "--out", help="Output folder for <name>.npy (float32 mm) and <name>.png.")
+    ] = Path("depth"),
+    device: Annotated[str, typer.Option(
+        help="auto (CUDA when present, else numpy), cpu or cuda (torch), numpy.")] = "auto",
+    batch: Annotated[int, typer.Option(min=1, help="Frames per step.")] = 8,
+) -> None:
+    """Reconstruct depth (mm) from tactile images with a calibration.
+
+    Example: [bold]vtsbench depth frames/ --calibration sensor.safetensors --out depth/[/]
+    """
+    from .depth.reconstruct import depth_folder
+
+    n = _run(depth_folder, images, calibration, out, solver=solver,
+             device=None if device == "numpy" else device, batch=batch)
+    typer.echo(f"wrote {n} depth map(s) to {out}")
+
+
 # -- collect: registered below --
 
 

@@ -1,0 +1,119 @@
+"""The sphere model of a ball press, its rim handling, and finding the contact circle."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tests.test_calibration_data import sim_folder
+from vtsbench.depth.sphere import (
+    Rim,
+    ball_radius_px,
+    cap_depth_mm,
+    clamp_radius,
+    detect_circle,
+    fit_circle,
+    sphere_fields,
+)
+from vtsbench.recordings.manifest import load_manifest
+from vtsbench.recordings.media import read_image
+
+MM = 0.05  # mm per px
+R_MM = 2.0  # ball radius: 40 px
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory: pytest.TempPathFactory):
+    return sim_folder(tmp_path_factory)
+
+
+def test_gradients_and_depth_follow_the_sphere() -> None:
+    x, y, r = 60.3, 50.7, 25.0
+    f = sphere_fields((100, 120), x, y, r, R_MM, MM)
+    big_r = R_MM / MM
+    yy, xx = np.mgrid[0:100, 0:120]
+    rho = np.hypot(xx - x, yy - y)
+    inside = rho < r
+    root = np.sqrt(big_r**2 - rho[inside] ** 2)
+    np.testing.assert_allclose(f.p[inside], -(xx - x)[inside] / root, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(f.q[inside], -(yy - y)[inside] / root, rtol=1e-5, atol=1e-6)
+    want = (root - math.sqrt(big_r**2 - r**2)) * MM
+    np.testing.assert_allclose(f.depth_mm[inside], want, rtol=1e-5, atol=1e-6)
+    assert (f.p[~inside] == 0).all() and (f.depth_mm[~inside] == 0).all()
+    assert f.depth_mm.max() == pytest.approx(cap_depth_mm(r, R_MM, MM), rel=1e-3)
+    # The gradients are those of the depth (central differences, away from the rim).
+    gy, gx = np.gradient(f.depth_mm.astype(np.float64), MM)
+    core = rho < r - 2
+    np.testing.assert_allclose(gx[core], f.p[core], atol=2e-3)
+    np.testing.assert_allclose(gy[core], f.q[core], atol=2e-3)
+
+
+@pytest.mark.parametrize("r", [1.0, 3.0, 20.0, 37.0, 39.5, 40.0, 44.0])
+def test_rim_is_finite_from_barely_touching_to_the_equator(r: float) -> None:
+    """Presses from a touch to (and past) the ball's radius give finite values everywhere."""
+    f = sphere_fields((90, 90), 45.0, 45.0, r, R_MM, MM)
+    for a in (f.p, f.q, f.depth_mm):
+        assert np.isfinite(a).all()
+    rim = Rim()
+    assert f.r_px == pytest.approx(min(r, rim.max_radius_frac * 40.0))
+    slope = np.hypot(f.p, f.q)
+    assert slope[f.trusted].max(initial=0) <= rim.max_slope + 1e-6
+    assert slope.max() < 10  # the clamped rim bounds the slope (0.97 R: 3.99)
+    # Trusted labels stay clear of the rim; flat samples clear of the contact.
+    yy, xx = np.mgrid[0:90, 0:90]
+    rho = np.hypot(xx - 45.0, yy - 45.0)
+    if f.trusted.any():
+        assert rho[f.trusted].max() <= f.r_px - rim.shrink(f.r_px) + 1e-9
+    if f.flat.any():
+        assert rho[f.flat].min() >= f.r_px + max(f.r_px, rim.flat_margin_mm / MM) - 1e-9
+    assert not (f.trusted & f.flat).any()
+
+
+def test_rim_settings_shrink_and_cap() -> None:
+    rim = Rim(shrink_px=2.0, shrink_frac=0.1, max_slope=1.0)
+    f = sphere_fields((100, 100), 50.0, 50.0, 36.0, R_MM, MM, rim)
+    yy, xx = np.mgrid[0:100, 0:100]
+    rho = np.hypot(xx - 50.0, yy - 50.0)
+    # Slope 1 at rho = R / sqrt(2) = 28.3 px, below 36 - 3.6: the slope cap decides.
+    assert rho[f.trusted].max() <= 40 / math.sqrt(2) + 1e-6
+    assert rim.shrink(10) == 2.0 and rim.shrink(50) == 5.0
+    assert Rim.from_dict(rim.to_dict()) == rim
+
+
+def test_radius_clamp_and_scale() -> None:
+    assert ball_radius_px(3.0, 0.03) == pytest.approx(100.0)
+    assert ball_radius_px(3.0, (0.03, 0.03)) == pytest.approx(100.0)
+    assert clamp_radius(120.0, 3.0, 0.03) == pytest.approx(97.0)
+    assert clamp_radius(50.0, 3.0, 0.03) == 50.0
+    f = sphere_fields((60, 80), 40.0, 30.0, 15.0, 1.0, (0.04, 0.05))  # anisotropic
+    assert np.isfinite(f.p).all() and f.contact.any()
+
+
+def test_fit_circle_exact() -> None:
+    t = np.linspace(0, 2 * np.pi, 50, endpoint=False)
+    cx, cy, r = fit_circle(12.5 + 7 * np.cos(t), -3 + 7 * np.sin(t))
+    assert (cx, cy, r) == pytest.approx((12.5, -3, 7), abs=1e-9)
+
+
+def test_detect_circle_recovers_labelled_circles(sim) -> None:
+    """On the simulated presses the detected circle is within 1.5 px of the label."""
+    m = load_manifest(sim)
+    bgs = {s.id: read_image(sim / s.background) for s in m.sessions}
+    for e in m.entries:
+        found = detect_circle(read_image(sim / e.source.path), bgs[e.session])
+        assert found is not None, e.id
+        x, y, r = found
+        assert math.hypot(x - e.circle.x, y - e.circle.y) < 1.5, (e.id, found, e.circle)
+        assert abs(r - e.circle.r) < 1.5, (e.id, found, e.circle)
+
+
+def test_detect_circle_finds_nothing_without_contact(sim) -> None:
+    m = load_manifest(sim)
+    bg = read_image(sim / m.sessions[0].background)
+    other = read_image(sim / m.sessions[1].background)  # same gel, another noise draw
+    assert detect_circle(other, bg) is None
+    assert detect_circle(bg, bg) is None
+    flat = np.full_like(bg, 128)
+    assert detect_circle(flat, flat) is None

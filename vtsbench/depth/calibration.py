@@ -1,0 +1,672 @@
+"""Sphere calibration: fit f(colour difference, x, y) -> (p, q) from ball presses, and its file.
+
+`calibrate(folder)` reads the `press` entries of a recordings folder, takes each press's contact
+circle (labelled, or found from the difference to the background), labels the pixels well inside
+it with the sphere's gradients and pixels far from it with zero (see `sphere.Rim`), fits one of
+the mappings of `mapping.py`, and scores the held-out presses by integrating their predicted
+gradients into depth. At run time the mapping's value for a zero difference, f(0, x, y), is
+subtracted, so an image equal to the background gives exactly zero gradients.
+
+The calibration file is safetensors (no pickle): the mapping's arrays, the background (uint8,
+H x W x 3) and the zero map f(0, x, y) (float32, H x W x 2) as tensors, and a JSON document under
+the metadata key "vtsbench" that `schemas/calibration.schema.json` describes.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import struct
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import VtsError
+from .mapping import METHODS, Mapping, fit_mapping, mapping_from_arrays
+from .sphere import Rim, ball_radius_px, detect_circle, sphere_fields
+
+FORMAT = "vtsbench.calibration"
+FORMAT_VERSION = "1.0"
+META_KEY = "vtsbench"
+#: Presses needed to train (plus the held-out ones).
+MIN_TRAIN = 3
+#: A labelled circle up to this factor above the ball radius in pixels is a hand-marking error
+#: and is clamped (sphere.Rim.max_radius_frac); beyond it the scale or ball radius is wrong.
+RADIUS_TOLERANCE = 1.15
+#: Training samples per press: at most this many pixels of the cap and of the flat gel.
+CAP_SAMPLES = 4000
+FLAT_SAMPLES = 1500
+#: Default Gaussian blur (px) of the colour difference before the mapping (sensor noise).
+BLUR_PX = 1.0
+SCHEMA_PATH = Path(__file__).resolve().parent.parent / "schemas" / "calibration.schema.json"
+
+
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("vtsbench")
+    except Exception:  # not installed (running from a source tree)
+        return "unknown"
+
+
+@dataclass
+class Calibration:
+    """A fitted sensor calibration: mapping, background and zero map, with its description."""
+
+    mapping: Mapping
+    background: np.ndarray  # (H, W, 3) uint8
+    zero_map: np.ndarray  # (H, W, 2) float32: f(0, x, y)
+    sensor: str
+    mm_per_px: tuple[float, float]
+    ball_radius_mm: float
+    rim: Rim = field(default_factory=Rim)
+    blur_px: float = BLUR_PX
+    colour_limit_dn: float = 255.0
+    fit: dict[str, Any] = field(default_factory=dict)
+    n_presses: int = 0
+    created_by: str = "vtsbench calibrate"
+    vtsbench_version: str = field(default_factory=_version)
+    format_version: str = FORMAT_VERSION
+
+    @property
+    def method(self) -> str:
+        return self.mapping.method
+
+    @property
+    def resolution(self) -> tuple[int, int]:
+        return int(self.background.shape[0]), int(self.background.shape[1])
+
+    # -- run time ------------------------------------------------------------------------
+
+    def difference(self, images: np.ndarray) -> np.ndarray:
+        """Colour difference to the background (float32 DN), blurred and clipped as calibrated."""
+        return colour_difference(images, self.background, self.blur_px, self.colour_limit_dn)
+
+    def gradients(self, images: np.ndarray) -> np.ndarray:
+        """(p, q) = (dz/dx, dz/dy) as (..., H, W, 2) float32 for RGB images (..., H, W, 3).
+
+        f(diff, x, y) - f(0, x, y): a pixel whose (blurred) difference is zero gets exactly 0.
+        """
+        images = np.asarray(images)
+        self._check_shape(images.shape)
+        diff = self.difference(images)
+        g = self.mapping.predict(diff)
+        g -= self.zero_map
+        g[~diff.any(axis=-1)] = 0.0
+        return g
+
+    def gradients_torch(self, images: Any) -> Any:
+        """The same on a torch tensor (..., H, W, 3) of RGB values, on the tensor's device."""
+        import torch
+
+        self._check_shape(tuple(images.shape))
+        dev = images.device
+        cache = self.__dict__.setdefault("_torch", {})
+        if str(dev) not in cache:
+            cache[str(dev)] = (torch.from_numpy(self.background.astype(np.float32)).to(dev),
+                               torch.from_numpy(self.zero_map).to(dev))
+        bg, zero = cache[str(dev)]
+        diff = images.to(torch.float32) - bg
+        if self.blur_px > 0:
+            diff = _blur_torch(diff, self.blur_px)
+        diff = diff.clamp(-self.colour_limit_dn, self.colour_limit_dn)
+        g = self.mapping.predict_torch(diff) - zero
+        return torch.where((diff != 0).any(dim=-1, keepdim=True), g, torch.zeros_like(g))
+
+    def _check_shape(self, shape: tuple[int, ...]) -> None:
+        if len(shape) < 3 or shape[-1] != 3:
+            raise VtsError(f"expected RGB images of shape (..., H, W, 3), got {tuple(shape)}")
+        h, w = shape[-3], shape[-2]
+        if (h, w) != self.resolution:
+            raise VtsError(f"images are {h}x{w} but the calibration is for "
+                           f"{self.resolution[0]}x{self.resolution[1]} (sensor {self.sensor})")
+
+    # -- file ----------------------------------------------------------------------------
+
+    def metadata(self) -> dict[str, Any]:
+        """The JSON document stored in the file (schemas/calibration.schema.json)."""
+        return {
+            "format": FORMAT,
+            "format_version": self.format_version,
+            "sensor": self.sensor,
+            "resolution": list(self.resolution),
+            "mm_per_px": [float(self.mm_per_px[0]), float(self.mm_per_px[1])],
+            "ball_radius_mm": float(self.ball_radius_mm),
+            "method": self.method,
+            "params": self.mapping.params,
+            "features": {"colour": "RGB difference to the background, DN",
+                         "position": "x, y of the pixel centre normalised to [-1, 1]",
+                         "blur_px": float(self.blur_px),
+                         "colour_limit_dn": float(self.colour_limit_dn)},
+            "rim": self.rim.to_dict(),
+            "fit": self.fit,
+            "n_presses": int(self.n_presses),
+            "vtsbench_version": self.vtsbench_version,
+            "created_by": self.created_by,
+        }
+
+    def tensors(self) -> dict[str, np.ndarray]:
+        t = {k: np.ascontiguousarray(v) for k, v in self.mapping.arrays.items()}
+        t["background"] = np.ascontiguousarray(self.background, np.uint8)
+        t["zero_map"] = np.ascontiguousarray(self.zero_map, np.float32)
+        return t
+
+
+def colour_difference(images: np.ndarray, background: np.ndarray, blur_px: float,
+                      limit_dn: float = 255.0) -> np.ndarray:
+    """images - background in float32 DN, Gaussian-blurred by blur_px, clipped to +-limit_dn."""
+    import cv2
+
+    diff = np.asarray(images, np.float32) - background.astype(np.float32)
+    if blur_px > 0:
+        frames = diff.reshape(-1, *diff.shape[-3:])
+        for k in range(frames.shape[0]):
+            frames[k] = cv2.GaussianBlur(frames[k], (0, 0), blur_px,
+                                         borderType=cv2.BORDER_REFLECT_101)
+    np.clip(diff, -limit_dn, limit_dn, out=diff)
+    return diff
+
+
+def _blur_torch(diff: Any, sigma: float) -> Any:
+    """Separable Gaussian blur over H, W of (..., H, W, 3), reflecting at the border (as cv2)."""
+    import torch
+
+    radius = max(1, math.ceil(4 * sigma))
+    x = torch.arange(-radius, radius + 1, dtype=torch.float32, device=diff.device)
+    k = torch.exp(-(x**2) / (2 * sigma**2))
+    k = k / k.sum()
+    lead = diff.shape[:-3]
+    h, w = diff.shape[-3:-1]
+    t = diff.reshape(-1, h, w, 3).permute(0, 3, 1, 2).reshape(-1, 1, h, w)
+    t = torch.nn.functional.pad(t, (radius, radius, 0, 0), mode="reflect")
+    t = torch.nn.functional.conv2d(t, k.view(1, 1, 1, -1))
+    t = torch.nn.functional.pad(t, (0, 0, radius, radius), mode="reflect")
+    t = torch.nn.functional.conv2d(t, k.view(1, 1, -1, 1))
+    return t.reshape(-1, 3, h, w).permute(0, 2, 3, 1).reshape(*lead, h, w, 3)
+
+
+# -- saving and loading ----------------------------------------------------------------------
+
+
+def save_calibration(cal: Calibration, path: str | Path) -> Path:
+    """Write the calibration atomically as safetensors with its JSON metadata."""
+    from safetensors.numpy import save
+
+    from ..atomic import write_bytes_atomic
+
+    path = Path(path)
+    if path.parent and not path.parent.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+    meta = json.dumps(cal.metadata(), sort_keys=True, allow_nan=False)
+    write_bytes_atomic(path, save(cal.tensors(), metadata={META_KEY: meta}))
+    mask = os.umask(0)
+    os.umask(mask)
+    os.chmod(path, 0o666 & ~mask)  # the temporary file was private; readable like any file
+    return path
+
+
+def _header(data: bytes, path: Path) -> dict[str, Any]:
+    """The safetensors JSON header, or a one-line error for anything else."""
+    if len(data) < 8:
+        raise VtsError("not a vtsbench calibration file (too short to be safetensors)", path)
+    (n,) = struct.unpack("<Q", data[:8])
+    if n == 0 or n > len(data) - 8:
+        if 0 < n < 100_000_000 and data[8:9] == b"{":
+            raise VtsError(f"truncated calibration file ({len(data)} bytes, its header alone "
+                           f"promises {8 + n})", path)
+        raise VtsError("not a vtsbench calibration file (no safetensors header)", path)
+    try:
+        head = json.loads(data[8:8 + n].decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        raise VtsError("not a vtsbench calibration file (unreadable safetensors header)",
+                       path) from None
+    if not isinstance(head, dict):
+        raise VtsError("not a vtsbench calibration file (unreadable safetensors header)", path)
+    end = max((int(v["data_offsets"][1]) for k, v in head.items()
+               if k != "__metadata__" and isinstance(v, dict) and "data_offsets" in v),
+              default=0)
+    if 8 + n + end > len(data):
+        raise VtsError(f"truncated calibration file ({len(data)} bytes, the header promises "
+                       f"{8 + n + end})", path)
+    return head
+
+
+def metadata_errors(meta: Any) -> list[str]:
+    """Every violation of the calibration metadata schema, one line each."""
+    import jsonschema
+
+    schema = json.loads(SCHEMA_PATH.read_text())
+    v = jsonschema.Draft202012Validator(schema)
+    out = []
+    for err in sorted(v.iter_errors(meta), key=lambda e: list(map(str, e.absolute_path))):
+        where = ".".join(map(str, err.absolute_path)) or "(top level)"
+        out.append(f"{where}: {err.message}")
+    return out
+
+
+def load_calibration(path: str | Path, *, sensor: str | None = None,
+                     resolution: tuple[int, int] | None = None) -> Calibration:
+    """Read a calibration file; one-line VtsError for anything that is not a usable one.
+
+    sensor, resolution: what the caller expects; a calibration of another sensor or resolution
+    is refused, naming both.
+    """
+    from safetensors.numpy import load
+
+    path = Path(path)
+    if not path.is_file():
+        raise VtsError("calibration file not found", path)
+    data = path.read_bytes()
+    head = _header(data, path)
+    raw = (head.get("__metadata__") or {}).get(META_KEY)
+    if raw is None:
+        raise VtsError("not a vtsbench calibration file (safetensors without vtsbench metadata)",
+                       path)
+    try:
+        meta = json.loads(raw)
+    except json.JSONDecodeError:
+        raise VtsError("corrupt calibration file (its metadata is not JSON)", path) from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise VtsError(f"not a vtsbench calibration file (format {meta.get('format')!r})"
+                       if isinstance(meta, dict) else "not a vtsbench calibration file", path)
+    ver = str(meta.get("format_version", ""))
+    if ver.split(".")[0] != FORMAT_VERSION.split(".")[0]:
+        raise VtsError(f"calibration format version {ver!r} is not supported (this vtsbench "
+                       f"reads {FORMAT_VERSION.split('.')[0]}.x); calibrate again", path)
+    errs = metadata_errors(meta)
+    if errs:
+        more = f" (and {len(errs) - 1} more)" if len(errs) > 1 else ""
+        raise VtsError(f"corrupt calibration metadata: {errs[0]}{more}", path)
+    res = (int(meta["resolution"][0]), int(meta["resolution"][1]))
+    if sensor is not None and meta["sensor"] != sensor:
+        raise VtsError(f"calibration is for sensor {meta['sensor']!r}, expected {sensor!r}", path)
+    if resolution is not None and tuple(int(v) for v in resolution) != res:
+        raise VtsError(f"calibration is for {res[0]}x{res[1]} frames, expected "
+                       f"{int(resolution[0])}x{int(resolution[1])}", path)
+    try:
+        tensors = load(data)
+    except Exception as e:  # safetensors raises its own error type for damaged data
+        raise VtsError(f"corrupt calibration file ({str(e).splitlines()[0]})", path) from None
+    bg, zero = tensors.pop("background", None), tensors.pop("zero_map", None)
+    if bg is None or bg.dtype != np.uint8 or bg.shape != (*res, 3):
+        raise VtsError(f"corrupt calibration file (background missing or not {res[0]}x{res[1]}"
+                       "x3 uint8)", path)
+    if zero is None or zero.shape != (*res, 2):
+        raise VtsError("corrupt calibration file (zero map missing or of the wrong shape)", path)
+    try:
+        mapping = mapping_from_arrays(meta["method"], meta["params"], tensors)
+    except (KeyError, TypeError, ValueError) as e:
+        raise VtsError(f"corrupt calibration file ({meta['method']} mapping: {e})", path) from None
+    feats = meta["features"]
+    return Calibration(
+        mapping=mapping, background=bg, zero_map=zero.astype(np.float32), sensor=meta["sensor"],
+        mm_per_px=(float(meta["mm_per_px"][0]), float(meta["mm_per_px"][1])),
+        ball_radius_mm=float(meta["ball_radius_mm"]), rim=Rim.from_dict(meta["rim"]),
+        blur_px=float(feats["blur_px"]), colour_limit_dn=float(feats["colour_limit_dn"]),
+        fit=meta["fit"], n_presses=int(meta["n_presses"]), created_by=meta["created_by"],
+        vtsbench_version=meta["vtsbench_version"], format_version=ver)
+
+
+# -- calibrating -----------------------------------------------------------------------------
+
+
+@dataclass
+class Press:
+    """One usable press: its frame, circle and where the circle came from."""
+
+    id: str
+    image: np.ndarray  # (H, W, 3) uint8
+    x: float
+    y: float
+    r: float
+    ball_radius_mm: float
+    circle_source: str  # "label" or "detected"
+    truth: Path | None = None
+
+
+@dataclass
+class HeldOut:
+    """A held-out press: its errors and the maps the report draws."""
+
+    press: Press
+    errors: dict[str, float]
+    reference: str  # "truth" (simulated ground truth) or "sphere" (the sphere model)
+    true_depth: np.ndarray
+    pred_depth: np.ndarray
+    region: np.ndarray
+    held_out: bool = True
+
+
+@dataclass
+class CalibrationRun:
+    """What `calibrate` returns: the calibration, its held-out presses and what happened."""
+
+    calibration: Calibration
+    held_out: list[HeldOut]
+    warnings: list[str]
+    seconds: float
+    train_examples: list[HeldOut] = field(default_factory=list)
+
+    @property
+    def shown(self) -> list[HeldOut]:
+        """The presses a report shows: the held-out ones, else a few training presses."""
+        return self.held_out or self.train_examples
+
+
+def _press_frame(root: Path, e: Any) -> np.ndarray:
+    from ..recordings.media import read_frame
+
+    return read_frame(root / e.source.path, e.source.frame or 0)
+
+
+def _resolve_scale(sessions: list[Any], mm_per_px: float | None) -> tuple[float, float]:
+    if mm_per_px is not None:
+        if not (math.isfinite(mm_per_px) and mm_per_px > 0):
+            raise VtsError(f"--mm-per-px must be positive, got {mm_per_px}")
+        return float(mm_per_px), float(mm_per_px)
+    scales = {s.mm_per_px for s in sessions}
+    if None in scales:
+        missing = ", ".join(s.id for s in sessions if s.mm_per_px is None)
+        raise VtsError(f"no mm_per_px for session {missing}: the scale is needed to turn the "
+                       "ball radius into pixels; pass --mm-per-px")
+    if len(scales) > 1:
+        raise VtsError(f"the press sessions disagree on mm_per_px ({sorted(scales)}); "
+                       "pass --mm-per-px")
+    return scales.pop()
+
+
+def _resolve_background(root: Path, sessions: list[Any], frames: list[np.ndarray],
+                        background: Path | None, estimate: bool,
+                        shape: tuple[int, int]) -> tuple[np.ndarray, str]:
+    from ..recordings.media import read_frame, read_image
+
+    if background is not None and estimate:
+        raise VtsError("pass either --background FILE or --estimate-background, not both")
+    if background is not None:
+        bg, how = read_image(Path(background)), f"file {background}"
+    elif estimate:
+        if len(frames) < 3:
+            raise VtsError(f"--estimate-background needs at least 3 press frames, got "
+                           f"{len(frames)}")
+        bg = np.median(np.stack(frames), axis=0).round().astype(np.uint8)
+        how = f"median of {len(frames)} press frames"
+    else:
+        have = [s for s in sessions if s.background]
+        if not have:
+            raise VtsError("no background (no-contact frame) for the presses: pass --background "
+                           "FILE or --estimate-background (the per-pixel median of the press "
+                           "frames)")
+        bgs = [read_frame(root / s.background, s.background_frame or 0) for s in have]
+        bg = bgs[0] if len(bgs) == 1 else \
+            np.median(np.stack(bgs), axis=0).round().astype(np.uint8)
+        how = "session background" if len(bgs) == 1 else f"median of {len(bgs)} session " \
+            "backgrounds"
+    if bg.shape[:2] != shape:
+        raise VtsError(f"background is {bg.shape[0]}x{bg.shape[1]} but the presses are "
+                       f"{shape[0]}x{shape[1]}", background)
+    return bg, how
+
+
+def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
+                 background: Path | None = None, estimate_background: bool = False
+                 ) -> tuple[list[Press], np.ndarray, dict[str, Any], list[str]]:
+    """The usable presses of a recordings folder, the background, the setup and warnings."""
+    from ..recordings.manifest import load_manifest
+
+    root = Path(folder)
+    m = load_manifest(root)
+    entries = [e for e in m.entries if e.kind == "press"]
+    if not entries:
+        raise VtsError("no press entries (calibration needs ball presses: entries of kind "
+                       "'press', e.g. from `vtsbench collect --kind press`)", root)
+    sessions = list({e.session: m.session(e.session) for e in entries}.values())
+    sensors = sorted({s.sensor for s in sessions})
+    if len(sensors) > 1:
+        raise VtsError(f"presses from several sensors ({', '.join(sensors)}): a calibration is "
+                       "per sensor; give it a folder with one sensor's presses", root)
+    shapes = sorted({tuple(s.resolution) for s in sessions})
+    if len(shapes) > 1:
+        raise VtsError(f"press sessions of several resolutions ({shapes}); calibrate each "
+                       "separately", root)
+    shape = (int(shapes[0][0]), int(shapes[0][1]))
+    scale = _resolve_scale(sessions, mm_per_px)
+    for e in entries:
+        if e.ball_radius_mm is None:
+            raise VtsError(f"press {e.id} has no ball radius (set ball_radius_mm in the "
+                           "manifest, e.g. `vtsbench manifest ... --ball-radius-mm 3`)", root)
+        d = e.labels.press_depth_mm
+        if d is not None and d >= e.ball_radius_mm:
+            raise VtsError(f"press {e.id} is {d} mm deep, not less than the ball radius "
+                           f"{e.ball_radius_mm} mm", root)
+        if e.circle is not None:
+            r_ball = ball_radius_px(e.ball_radius_mm, scale)
+            if e.circle.r > RADIUS_TOLERANCE * r_ball:
+                raise VtsError(f"press {e.id}: circle radius {e.circle.r:g} px is larger than "
+                               f"the ball ({e.ball_radius_mm:g} mm = {r_ball:.1f} px at "
+                               f"{scale[0]:g} mm/px); check the scale or the ball radius", root)
+    frames = []
+    for e in entries:
+        img = _press_frame(root, e)
+        if img.shape[:2] != shape:
+            raise VtsError(f"press {e.id} is {img.shape[0]}x{img.shape[1]}, its session says "
+                           f"{shape[0]}x{shape[1]}", root / e.source.path)
+        frames.append(img)
+    bg, bg_how = _resolve_background(root, sessions, frames, background, estimate_background,
+                                     shape)
+    presses, warnings, lost = [], [], []
+    for e, img in zip(entries, frames, strict=True):
+        truth = root / e.truth if e.truth else None
+        if e.circle is not None:
+            presses.append(Press(e.id, img, e.circle.x, e.circle.y, e.circle.r,
+                                 float(e.ball_radius_mm), "label", truth))
+            continue
+        found = detect_circle(img, bg)
+        if found is None:
+            lost.append(e.id)
+            continue
+        presses.append(Press(e.id, img, *found, float(e.ball_radius_mm), "detected", truth))
+    if lost:
+        warnings.append(f"no visible contact in {len(lost)} press(es), dropped: "
+                        f"{', '.join(lost)}")
+    radii = sorted({p.ball_radius_mm for p in presses})
+    setup = {"root": root, "sensor": sensors[0], "shape": shape, "mm_per_px": scale,
+             "background": bg_how, "lost": lost, "n_entries": len(entries),
+             "ball_radius_mm": radii[0] if radii else float(entries[0].ball_radius_mm)}
+    if len(radii) > 1:
+        warnings.append(f"presses of several ball radii ({radii} mm); the file records "
+                        f"{radii[0]} mm")
+    return presses, bg, setup, warnings
+
+
+def training_samples(presses: list[Press], background: np.ndarray, scale: tuple[float, float],
+                     rim: Rim, blur_px: float, rng: np.random.Generator
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(colour (N, 3), xy (N, 2), target (N, 2), is_cap (N,)) from the presses' labelled pixels."""
+    from .mapping import norm_xy
+
+    h, w = background.shape[:2]
+    xn, yn = norm_xy(h, w)
+    cols, xys, tgts, caps = [], [], [], []
+    for p in presses:
+        f = sphere_fields((h, w), p.x, p.y, p.r, p.ball_radius_mm, scale, rim)
+        diff = colour_difference(p.image, background, blur_px)
+        for sel, n_max, is_cap in ((f.trusted, CAP_SAMPLES, True), (f.flat, FLAT_SAMPLES, False)):
+            ys, xs = np.nonzero(sel)
+            if ys.size > n_max:
+                k = np.sort(rng.choice(ys.size, n_max, replace=False))
+                ys, xs = ys[k], xs[k]
+            cols.append(diff[ys, xs])
+            xys.append(np.column_stack([xn[xs], yn[ys]]))
+            tgts.append(np.column_stack([f.p[ys, xs], f.q[ys, xs]]) if is_cap
+                        else np.zeros((ys.size, 2), np.float32))
+            caps.append(np.full(ys.size, is_cap))
+    return (np.concatenate(cols).astype(np.float32), np.concatenate(xys).astype(np.float32),
+            np.concatenate(tgts).astype(np.float32), np.concatenate(caps))
+
+
+def evaluate_press(cal: Calibration, press: Press, *, solver: str = "dct",
+                   held_out: bool = True) -> HeldOut:
+    """Errors of one press: gradient RMSE over the trusted cap, depth errors of its integral."""
+    from ..recordings.truth import read_truth
+    from .metrics import depth_errors
+    from .poisson import integrate
+
+    h, w = cal.resolution
+    f = sphere_fields((h, w), press.x, press.y, press.r, press.ball_radius_mm, cal.mm_per_px,
+                      cal.rim)
+    g = cal.gradients(press.image)
+    e = np.hypot(g[..., 0] - f.p, g[..., 1] - f.q)[f.trusted]
+    grad_rmse = float(np.sqrt(np.mean(e**2))) if e.size else math.nan
+    pred = integrate(g[..., 0], g[..., 1], method=solver, mm_per_px=cal.mm_per_px)
+    if press.truth is not None:
+        t = read_truth(press.truth)
+        true, region, ref = t.depth_mm[0], t.contact[0], "truth"
+    else:
+        true, region, ref = f.depth_mm, f.contact, "sphere"
+    errs = depth_errors(pred, true, region).to_dict()
+    errs = {"gradient_rmse": grad_rmse, **errs}
+    return HeldOut(press, errs, ref, true, pred, region, held_out)
+
+
+def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = None,
+              seed: int = 0, mm_per_px: float | None = None, background: Path | None = None,
+              estimate_background: bool = False, rim: Rim | None = None,
+              blur_px: float = BLUR_PX, solver: str = "dct", device: str | None = "auto",
+              options: dict[str, Any] | None = None,
+              log: Callable[[str], None] | None = None) -> CalibrationRun:
+    """Fit a calibration from the presses of a recordings folder (see the module doc).
+
+    holdout: presses kept out of training and scored (default: a fifth, none below 4 presses).
+    options: the method's parameters (lut: bins, cells; poly: degree; mlp: width, depth,
+    epochs, lr, batch_size).
+    """
+    t0 = time.perf_counter()
+    say = log or (lambda _msg: None)
+    if method not in METHODS:
+        raise VtsError(f"unknown method {method!r} (use one of {', '.join(METHODS)})")
+    rim = rim or Rim()
+    presses, bg, setup, warnings = load_presses(folder, mm_per_px=mm_per_px,
+                                                background=background,
+                                                estimate_background=estimate_background)
+    n = len(presses)
+    k = (n // 5 if n - n // 5 >= MIN_TRAIN else 0) if holdout is None else int(holdout)
+    if k < 0:
+        raise VtsError(f"--holdout must be >= 0, got {k}")
+    if n < MIN_TRAIN + k:
+        lost = setup["lost"]
+        why = f" ({len(lost)} of {setup['n_entries']} without visible contact: " \
+              f"{', '.join(lost)})" if lost else ""
+        raise VtsError(f"too few presses: {n} usable{why}; need at least {MIN_TRAIN + k} "
+                       f"({MIN_TRAIN} to train plus --holdout {k})", setup["root"])
+    for w_ in warnings:
+        say(f"warning: {w_}")
+    rng = np.random.default_rng(seed)
+    held_idx = sorted(rng.choice(n, k, replace=False).tolist()) if k else []
+    train = [p for i, p in enumerate(presses) if i not in held_idx]
+    held = [presses[i] for i in held_idx]
+    scale = setup["mm_per_px"]
+    say(f"{n} presses ({sum(p.circle_source == 'detected' for p in presses)} circles detected), "
+        f"{len(train)} to train, {len(held)} held out; background: {setup['background']}")
+    colour, xy, target, is_cap = training_samples(train, bg, scale, rim, blur_px, rng)
+    limit = float(min(255.0, np.percentile(np.abs(colour), 99.9) * 1.05 + 1.0))
+    np.clip(colour, -limit, limit, out=colour)
+    opts = dict(options or {})
+    if method == "mlp":
+        opts.setdefault("seed", seed)
+        opts.setdefault("device", device)
+    t_fit = time.perf_counter()
+    mapping = fit_mapping(method, colour, xy, target, **opts)
+    fit_s = time.perf_counter() - t_fit
+    h, w = setup["shape"]
+    zero = mapping.predict(np.zeros((h, w, 3), np.float32))
+    cal = Calibration(mapping=mapping, background=bg, zero_map=zero, sensor=setup["sensor"],
+                      mm_per_px=scale, ball_radius_mm=setup["ball_radius_mm"], rim=rim,
+                      blur_px=blur_px, colour_limit_dn=limit, n_presses=len(train))
+    # Training error as the file will answer: f(c, x, y) - f(0, x, y) at the samples.
+    xi = np.clip(((xy[:, 0] + 1) / 2 * w).astype(np.int64), 0, w - 1)
+    yi = np.clip(((xy[:, 1] + 1) / 2 * h).astype(np.int64), 0, h - 1)
+    pred = mapping.predict_flat(colour, xy) - zero[yi, xi]
+    err = np.hypot(*(pred - target).T)
+    say(f"fitted {method} on {colour.shape[0]} samples in {fit_s:.1f} s; gradient RMSE "
+        f"{np.sqrt(np.mean(err[is_cap] ** 2)):.4f} on the caps")
+    results = [evaluate_press(cal, p, solver=solver) for p in held]
+    keys = ("gradient_rmse", "plane_aligned_rmse_mm", "contact_rmse_mm", "peak_depth_error_mm")
+    cal.fit = {
+        "train_gradient_rmse": float(np.sqrt(np.mean(err**2))),
+        "train_gradient_rmse_cap": float(np.sqrt(np.mean(err[is_cap] ** 2))),
+        "n_samples": int(colour.shape[0]),
+        "n_samples_cap": int(is_cap.sum()),
+        "seed": int(seed),
+        "solver": solver,
+        "background": setup["background"],
+        "train_ids": [p.id for p in train],
+        "dropped_ids": list(setup["lost"]),
+        "circles_detected": sum(p.circle_source == "detected" for p in presses),
+        "fit_seconds": round(fit_s, 3),
+        "holdout": [{"id": r.press.id, "reference": r.reference,
+                     **{kk: _num(r.errors[kk]) for kk in keys}} for r in results],
+        "holdout_mean": {kk: _num(float(np.mean([r.errors[kk] for r in results])))
+                         for kk in keys} if results else {},
+    }
+    examples = [] if results else [evaluate_press(cal, p, solver=solver, held_out=False)
+                                   for p in train[:3]]
+    return CalibrationRun(cal, results, warnings, time.perf_counter() - t0, examples)
+
+
+def _num(v: float) -> float | None:
+    """A JSON-safe number (None for NaN)."""
+    return None if not math.isfinite(v) else float(v)
+
+
+# -- real data: the Taxim GelSight presses -------------------------------------------------
+
+
+def taxim_recordings(npz: str | Path, out: str | Path) -> Path:
+    """A recordings folder for Taxim's `dataPack_small.npz` GelSight presses, written to out.
+
+    The archive holds the background `f0`, the presses `imgs` (RGB), their labelled circles
+    (`touch_center` x, y and `touch_radius`, px) of a 2 mm-radius ball at 0.1245 mm/px.
+    """
+    from ..recordings.manifest import (
+        Circle,
+        Entry,
+        Manifest,
+        Session,
+        Source,
+        save_manifest,
+    )
+    from ..recordings.media import write_png
+
+    npz, out = Path(npz), Path(out)
+    try:
+        with np.load(npz, allow_pickle=False) as z:
+            f0, imgs = z["f0"], z["imgs"]
+            centre, radius = z["touch_center"], z["touch_radius"]
+    except FileNotFoundError:
+        raise VtsError("file not found", npz) from None
+    except (KeyError, ValueError, OSError) as e:
+        raise VtsError(f"not a Taxim data pack ({e})", npz) from None
+    (out / "presses").mkdir(parents=True, exist_ok=True)
+    write_png(out / "background.png", np.ascontiguousarray(f0, np.uint8))
+    h, w = f0.shape[:2]
+    entries = []
+    for i, img in enumerate(imgs):
+        name = f"presses/press-{i:03d}.png"
+        write_png(out / name, np.ascontiguousarray(img, np.uint8))
+        entries.append(Entry(f"press-{i:03d}", "press", "s0", Source(name),
+                             object="calibration_ball", ball_radius_mm=2.0,
+                             circle=Circle(float(centre[i, 0]), float(centre[i, 1]),
+                                           float(radius[i]))))
+    m = Manifest(sessions=[Session("s0", "gelsight-taxim", (h, w), (0.1245, 0.1245),
+                                   background="background.png")],
+                 entries=entries, name="taxim-gelsight-ball",
+                 description="Taxim GelSight ball presses (dataPack_small.npz)",
+                 created_by="vtsbench.depth.calibration.taxim_recordings")
+    save_manifest(out, m)
+    return out

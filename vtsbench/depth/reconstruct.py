@@ -1,0 +1,201 @@
+"""Images to depth: the calibration's gradients, integrated by a Poisson solver.
+
+    reconstruct(images, calibration)  RGB (..., H, W, 3) -> depth (..., H, W) float32 mm
+
+The numpy path runs by default; with `device` ("cuda", "cpu", or "auto" = CUDA when torch sees
+one) the mapping and the integration run in torch on that device. `depth_folder` is the
+`vtsbench depth` command: an image, a folder of images or a video in, a `.npy` (float32 mm) and
+a colour-mapped `.png` per frame out.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import VtsError
+from .calibration import Calibration
+from .mapping import resolve_device
+
+SOLVERS = ("dct", "dst", "masked")
+
+
+def _check_images(images: Any, calibration: Calibration) -> np.ndarray:
+    arr = np.asarray(images)
+    if arr.dtype == bool or not (np.issubdtype(arr.dtype, np.integer)
+                                 or np.issubdtype(arr.dtype, np.floating)):
+        raise VtsError(f"images must be RGB numbers (uint8 or float 0..255), got {arr.dtype}")
+    calibration._check_shape(arr.shape)
+    if np.issubdtype(arr.dtype, np.floating) and not np.isfinite(arr).all():
+        bad = int((~np.isfinite(arr)).sum())
+        raise VtsError(f"images contain NaN or inf ({bad} values)")
+    return arr
+
+
+def _mask_for(mask: Any, lead: tuple[int, ...], hw: tuple[int, int]) -> np.ndarray | None:
+    if mask is None:
+        return None
+    m = np.asarray(mask)
+    if m.dtype != bool:
+        raise VtsError(f"mask must be boolean, got {m.dtype}")
+    try:
+        return np.broadcast_to(m, (*lead, *hw)).reshape(-1, *hw)
+    except ValueError:
+        raise VtsError(f"mask of shape {m.shape} does not fit frames {(*lead, *hw)}") from None
+
+
+def reconstruct(images: Any, calibration: Calibration, *, solver: str = "dct",
+                mask: Any = None, device: str | None = None, batch: int = 8) -> np.ndarray:
+    """Depth (mm, positive into the gel) of RGB frames (..., H, W, 3), float32 (..., H, W).
+
+    solver: "dct" (free border, border median at 0), "dst" (zero depth beyond the frame) or
+    "masked" (zero depth off the mask; without a mask, the pixels whose colour differs from the
+    calibration's background, vtsbench.depth.mask.mask_from_images). mask: (..., H, W) bool,
+    masked solver only. device: None for numpy; "auto" for CUDA when present (else numpy);
+    "cpu" or "cuda[:n]" for torch there. batch: frames per step.
+    """
+    if solver not in SOLVERS:
+        raise VtsError(f"unknown solver {solver!r} (use one of {', '.join(SOLVERS)})")
+    if mask is not None and solver != "masked":
+        raise VtsError(f"a mask is used only by the masked solver, not {solver!r}")
+    arr = _check_images(images, calibration)
+    h, w = calibration.resolution
+    lead = arr.shape[:-3]
+    frames = arr.reshape(-1, h, w, 3)
+    masks = _mask_for(mask, lead, (h, w))
+    dev = resolve_device(device)
+    out = np.empty((frames.shape[0], h, w), np.float32)
+    step = max(1, int(batch))
+    for s in range(0, frames.shape[0], step):
+        chunk = frames[s:s + step]
+        m = None if masks is None else masks[s:s + step]
+        if solver == "masked" and m is None:
+            from .mask import mask_from_images
+
+            m = mask_from_images(chunk, calibration.background)
+        if dev is None:
+            out[s:s + step] = _numpy_depth(chunk, calibration, solver, m)
+        else:
+            out[s:s + step] = _torch_depth(chunk, calibration, solver, m, dev)
+    return out.reshape(*lead, h, w)
+
+
+def _numpy_depth(frames: np.ndarray, cal: Calibration, solver: str,
+                 mask: np.ndarray | None) -> np.ndarray:
+    from .poisson import integrate
+
+    g = cal.gradients(frames)
+    return integrate(g[..., 0], g[..., 1], method=solver, mask=mask, mm_per_px=cal.mm_per_px,
+                     dtype=np.float32)
+
+
+def _torch_depth(frames: np.ndarray, cal: Calibration, solver: str, mask: np.ndarray | None,
+                 device: str) -> np.ndarray:
+    try:
+        import torch
+
+        from .poisson_torch import integrate_torch
+    except ImportError:
+        raise VtsError(f"device {device!r} needs torch (pip install 'vtsbench[torch]'); "
+                       "leave the device out for the numpy path") from None
+    try:
+        dev = torch.device(device)
+        x = torch.from_numpy(np.ascontiguousarray(frames)).to(dev)
+    except (RuntimeError, AssertionError) as e:
+        raise VtsError(f"device {device!r} is not usable here ({str(e).splitlines()[0]})") \
+            from None
+    with torch.no_grad():
+        g = cal.gradients_torch(x)
+        tm = None if mask is None else torch.from_numpy(np.ascontiguousarray(mask)).to(dev)
+        z = integrate_torch(g[..., 0], g[..., 1], method=solver, mask=tm,
+                            mm_per_px=cal.mm_per_px)
+    return z.to(torch.float32).cpu().numpy()
+
+
+# -- files ------------------------------------------------------------------------------------
+
+
+def colourise(depth: np.ndarray, vmax: float | None = None) -> np.ndarray:
+    """A depth map (mm) as RGB uint8: 0 (and above the gel) black-violet, vmax yellow (viridis).
+
+    vmax defaults to the frame's 99.9th percentile, at least 0.05 mm, so an untouched frame is
+    not stretched into noise.
+    """
+    from matplotlib import colormaps
+
+    d = np.nan_to_num(np.asarray(depth, np.float32))
+    if vmax is None:
+        vmax = max(float(np.percentile(d, 99.9)), 0.05)
+    t = np.clip(d / vmax, 0.0, 1.0)
+    lut = (colormaps["viridis"](np.linspace(0, 1, 256))[:, :3] * 255).round().astype(np.uint8)
+    return lut[(t * 255).round().astype(np.int64)]
+
+
+def _frames(path: Path, batch: int) -> Iterator[tuple[list[str], np.ndarray]]:
+    """(names, frames) in batches from an image, an image folder or a video."""
+    from ..recordings.media import Capture, folder_frames, media_kind, read_image
+
+    if not path.exists():
+        raise VtsError("not found (expected an image, a folder of images or a video)", path)
+    kind = media_kind(path)
+    if kind == "image":
+        yield [path.stem], read_image(path)[None]
+    elif kind == "folder":
+        files = folder_frames(path)
+        if not files:
+            raise VtsError("folder holds no images", path)
+        for s in range(0, len(files), batch):
+            part = files[s:s + batch]
+            yield [f.stem for f in part], np.stack([read_image(f) for f in part])
+    else:
+        with Capture(str(path)) as cap:
+            names: list[str] = []
+            buf: list[np.ndarray] = []
+            i = 0
+            while True:
+                f = cap.read()
+                if f is None:
+                    break
+                names.append(f"{path.stem}_{i:05d}")
+                buf.append(f)
+                i += 1
+                if len(buf) == batch:
+                    yield names, np.stack(buf)
+                    names, buf = [], []
+            if buf:
+                yield names, np.stack(buf)
+            if i == 0:
+                raise VtsError("video has no readable frame", path)
+
+
+def depth_folder(images: str | Path, calibration: str | Path, out: str | Path, *,
+                 solver: str = "dct", device: str | None = "auto", batch: int = 8) -> int:
+    """Write <name>.npy (float32 mm) and <name>.png (colour-mapped) per frame; frames done."""
+    import io
+
+    from ..atomic import write_bytes_atomic
+    from ..recordings.media import write_png
+    from .calibration import load_calibration
+
+    images, out = Path(images), Path(out)
+    cal = load_calibration(calibration)
+    n = 0
+    for names, frames in _frames(images, max(1, batch)):
+        if n == 0 and frames.shape[1:3] != cal.resolution:
+            h, w = frames.shape[1:3]
+            raise VtsError(f"frames are {h}x{w} but calibration {calibration} is for "
+                           f"{cal.resolution[0]}x{cal.resolution[1]} (sensor {cal.sensor})",
+                           images)
+        depth = reconstruct(frames, cal, solver=solver, device=device, batch=batch)
+        if n == 0:
+            out.mkdir(parents=True, exist_ok=True)
+        for name, d in zip(names, depth, strict=True):
+            buf = io.BytesIO()
+            np.save(buf, d.astype(np.float32), allow_pickle=False)
+            write_bytes_atomic(out / f"{name}.npy", buf.getvalue())
+            write_png(out / f"{name}.png", colourise(d))
+            n += 1
+    return n

@@ -1,0 +1,123 @@
+"""The calibration report: a PNG of the held-out presses and a JSON of their errors.
+
+For each shown press (the held-out ones; with `--holdout 0`, a few training presses, marked so)
+one row: the press frame around the contact, the reference depth (simulated truth, or the
+sphere model inside the circle), the reconstruction, the error after removing its best plane
+over the contact (what the plane-aligned RMSE measures), and the profiles along the row through
+the circle's centre (reference and plane-aligned reconstruction).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .calibration import CalibrationRun, HeldOut
+
+MAX_ROWS = 8
+
+
+def _plane_removed(pred: np.ndarray, true: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """pred minus the least-squares plane of (pred - true) over the region (whole frame)."""
+    ys, xs = np.nonzero(region)
+    if ys.size < 3:
+        return pred.astype(np.float64)
+    e = (pred - true)[region].astype(np.float64)
+    a = np.column_stack([np.ones(ys.size), xs, ys])
+    c, *_ = np.linalg.lstsq(a, e, rcond=None)
+    h, w = pred.shape
+    yy, xx = np.mgrid[0:h, 0:w]
+    return pred - (c[0] + c[1] * xx + c[2] * yy)
+
+
+def _box(h_: HeldOut, shape: tuple[int, int]) -> tuple[int, int, int, int]:
+    p = h_.press
+    half = math.ceil(max(1.7 * p.r, 8))
+    y0, y1 = max(0, int(p.y) - half), min(shape[0], int(p.y) + half + 1)
+    x0, x1 = max(0, int(p.x) - half), min(shape[1], int(p.x) + half + 1)
+    return y0, y1, x0, x1
+
+
+def summary(run: CalibrationRun) -> dict[str, Any]:
+    """The report's JSON: method, fit statistics and the shown presses' errors (mm)."""
+    cal = run.calibration
+    rows = [{"id": r.press.id, "held_out": r.held_out, "reference": r.reference,
+             "circle": {"x": r.press.x, "y": r.press.y, "r": r.press.r,
+                        "source": r.press.circle_source},
+             **{k: (None if not math.isfinite(v) else v) for k, v in r.errors.items()}}
+            for r in run.shown]
+    return {"method": cal.method, "params": cal.mapping.params, "sensor": cal.sensor,
+            "resolution": list(cal.resolution), "mm_per_px": list(cal.mm_per_px),
+            "n_presses": cal.n_presses, "seconds": round(run.seconds, 2),
+            "train_gradient_rmse": cal.fit.get("train_gradient_rmse"),
+            "holdout_mean": cal.fit.get("holdout_mean", {}), "presses": rows,
+            "warnings": run.warnings}
+
+
+def write_report(run: CalibrationRun, folder: str | Path) -> tuple[Path, Path]:
+    """Write report.png and report.json into folder; returns their paths."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from ..atomic import write_bytes_atomic, write_text_atomic
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    js = folder / "report.json"
+    write_text_atomic(js, json.dumps(summary(run), indent=1, allow_nan=False) + "\n")
+
+    rows = run.shown[:MAX_ROWS]
+    cal = run.calibration
+    fig = Figure(figsize=(15, 2.7 * max(1, len(rows)) + 0.6), dpi=90)
+    FigureCanvasAgg(fig)
+    title = (f"{cal.method} calibration of {cal.sensor}: "
+             f"{'held-out' if rows and rows[0].held_out else 'training'} presses "
+             f"(plane-aligned RMSE over the contact, mm)")
+    fig.suptitle(title, fontsize=11)
+    if not rows:
+        fig.text(0.5, 0.5, "no presses to show", ha="center")
+    for i, r in enumerate(rows):
+        y0, y1, x0, x1 = _box(r, cal.resolution)
+        true, pred = r.true_depth, _plane_removed(r.pred_depth, r.true_depth, r.region)
+        err = np.where(r.region, pred - true, np.nan)[y0:y1, x0:x1]
+        vmax = max(float(true.max()), float(pred[y0:y1, x0:x1].max()), 1e-3)
+        axes = [fig.add_subplot(len(rows), 5, 5 * i + k + 1) for k in range(5)]
+        axes[0].imshow(r.press.image[y0:y1, x0:x1])
+        axes[0].set_title(f"{r.press.id} ({r.press.circle_source} circle)", fontsize=8)
+        axes[1].imshow(true[y0:y1, x0:x1], vmin=0, vmax=vmax, cmap="viridis")
+        axes[1].set_title(f"reference ({r.reference}), max {true.max():.3f} mm", fontsize=8)
+        im = axes[2].imshow(pred[y0:y1, x0:x1], vmin=0, vmax=vmax, cmap="viridis")
+        axes[2].set_title("reconstructed (plane-aligned)", fontsize=8)
+        fig.colorbar(im, ax=axes[2], fraction=0.046, label="mm")
+        lim = max(float(np.nanmax(np.abs(err))) if np.isfinite(err).any() else 0.0, 1e-3)
+        im = axes[3].imshow(err, vmin=-lim, vmax=lim, cmap="coolwarm")
+        axes[3].set_title(f"error, RMSE {r.errors['plane_aligned_rmse_mm']:.4f} mm", fontsize=8)
+        fig.colorbar(im, ax=axes[3], fraction=0.046, label="mm")
+        for ax in axes[:4]:
+            ax.set_xticks([])
+            ax.set_yticks([])
+        row = min(max(round(r.press.y), 0), cal.resolution[0] - 1)
+        xs = np.arange(x0, x1) * cal.mm_per_px[0]
+        axes[4].plot(xs, true[row, x0:x1], label="reference", color="k")
+        axes[4].plot(xs, pred[row, x0:x1], label="reconstructed", color="tab:orange")
+        axes[4].axvspan((r.press.x - r.press.r) * cal.mm_per_px[0],
+                        (r.press.x + r.press.r) * cal.mm_per_px[0], color="0.9")
+        axes[4].invert_yaxis()
+        axes[4].set_xlabel("x (mm)", fontsize=8)
+        axes[4].set_ylabel("depth (mm)", fontsize=8)
+        axes[4].tick_params(labelsize=7)
+        axes[4].set_title(f"profile through the centre (row {row})", fontsize=8)
+        if i == 0:
+            axes[4].legend(fontsize=7)
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    png = folder / "report.png"
+    write_bytes_atomic(png, buf.getvalue())
+    return png, js

@@ -1,0 +1,234 @@
+"""The calibration ball: its gradients and depth inside the contact circle, and finding the circle.
+
+A ball of radius R pressed into the gel leaves a spherical cap inside the contact circle (centre
+xc, yc; radius r). With rho the distance to the centre (all in mm, y down the rows):
+
+    p = dD/dx = -(x - xc) / sqrt(R^2 - rho^2)
+    q = dD/dy = -(y - yc) / sqrt(R^2 - rho^2)
+    D = sqrt(R^2 - rho^2) - sqrt(R^2 - r^2)        (0 at the rim, positive into the gel)
+
+Rim handling (`Rim`): the slope grows without bound towards the ball's equator and jumps at the
+contact edge, where the gel leaves the ball and a labelled or detected circle is least sure, so
+only pixels well inside the circle are trusted as training labels:
+
+    trusted = rho <= r - max(shrink_px, shrink_frac * r)   and   slope <= max_slope
+    flat    = rho >= r + max(r, flat_margin_mm)            (zero gradient: the gel is flat there)
+
+The ring between the two is left out of training altogether: the gel around a contact is dragged
+down into a skirt whose shape the sphere does not describe. A circle radius of at least
+`max_radius_frac` of the ball radius (hand-marked circles are often a little too large) is
+clamped to it before taking sqrt(R^2 - r^2), so every value is finite.
+
+`detect_circle` finds an unlabelled contact from the difference to the no-contact background:
+blur, threshold above the noise, largest component, then the circle through the strongest change
+along rays from its centre (the colour change is largest where the cap is steepest, at its rim),
+fitted by least squares with outliers dropped.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Rim:
+    """How the rim of the contact and the gel around it are treated (see the module doc)."""
+
+    shrink_px: float = 2.0
+    shrink_frac: float = 0.06
+    max_slope: float = 2.5
+    flat_margin_mm: float = 1.5
+    max_radius_frac: float = 0.97
+
+    def to_dict(self) -> dict[str, float]:
+        return {k: float(v) for k, v in asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Rim:
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: float(v) for k, v in d.items() if k in names})
+
+    def shrink(self, r_px: float) -> float:
+        """Pixels taken off the contact radius before labels are trusted."""
+        return max(self.shrink_px, self.shrink_frac * r_px)
+
+    def flat_radius(self, r_px: float, mm_per_px: float) -> float:
+        """Distance from the centre (px) beyond which the gel counts as flat."""
+        return r_px + max(r_px, self.flat_margin_mm / mm_per_px)
+
+
+@dataclass
+class SphereFields:
+    """The sphere model of one press over the frame (float32 maps, bool masks)."""
+
+    p: np.ndarray  # dD/dx, mm/mm; 0 outside the contact
+    q: np.ndarray  # dD/dy, mm/mm (y down the rows)
+    depth_mm: np.ndarray  # cap depth, 0 at the rim and outside
+    contact: np.ndarray  # rho < r
+    trusted: np.ndarray  # training labels of the cap (rim handling applied)
+    flat: np.ndarray  # far from the contact: zero-gradient samples
+    r_px: float  # contact radius used (after clamping)
+
+
+def _scale(mm_per_px: float | tuple[float, float]) -> tuple[float, float]:
+    if isinstance(mm_per_px, (int, float)):
+        return float(mm_per_px), float(mm_per_px)
+    return float(mm_per_px[0]), float(mm_per_px[1])
+
+
+def ball_radius_px(ball_radius_mm: float, mm_per_px: float | tuple[float, float]) -> float:
+    """The ball radius in pixels (geometric mean of the two scales when anisotropic)."""
+    mx, my = _scale(mm_per_px)
+    return ball_radius_mm / math.sqrt(mx * my)
+
+
+def clamp_radius(r_px: float, ball_radius_mm: float, mm_per_px: float | tuple[float, float],
+                 rim: Rim = Rim()) -> float:
+    """The contact radius (px) clamped below the ball radius by `rim.max_radius_frac`."""
+    return min(float(r_px), rim.max_radius_frac * ball_radius_px(ball_radius_mm, mm_per_px))
+
+
+def cap_depth_mm(r_px: float, ball_radius_mm: float,
+                 mm_per_px: float | tuple[float, float]) -> float:
+    """Depth (mm) of a cap whose contact radius is r_px: R - sqrt(R^2 - r^2)."""
+    mx, my = _scale(mm_per_px)
+    r_mm = r_px * math.sqrt(mx * my)
+    return ball_radius_mm - math.sqrt(max(ball_radius_mm**2 - r_mm**2, 0.0))
+
+
+def sphere_fields(shape: tuple[int, int], x: float, y: float, r_px: float,
+                  ball_radius_mm: float, mm_per_px: float | tuple[float, float],
+                  rim: Rim = Rim()) -> SphereFields:
+    """Gradients, depth and masks of a ball press centred at (x, y) px with contact radius r_px.
+
+    The radius is clamped (see `clamp_radius`); the square root is floored at its value on the
+    clamped rim, so every output is finite even for a circle as large as the ball.
+    """
+    h, w = shape
+    mx, my = _scale(mm_per_px)
+    s = math.sqrt(mx * my)
+    r_px = clamp_radius(r_px, ball_radius_mm, (mx, my), rim)
+    big_r = float(ball_radius_mm)
+    r_mm = r_px * s
+    dx = ((np.arange(w, dtype=np.float64) - x) * mx)[None, :]
+    dy = ((np.arange(h, dtype=np.float64) - y) * my)[:, None]
+    rho2 = dx**2 + dy**2
+    rho_px = np.sqrt(rho2) / s
+    contact = rho_px < r_px
+    root = np.sqrt(np.maximum(big_r**2 - rho2, big_r**2 - r_mm**2))
+    rim_root = math.sqrt(big_r**2 - r_mm**2)
+    p = np.where(contact, -dx / root, 0.0)
+    q = np.where(contact, -dy / root, 0.0)
+    depth = np.where(contact, root - rim_root, 0.0)
+    slope = np.sqrt(rho2) / root
+    trusted = (rho_px <= r_px - rim.shrink(r_px)) & (slope <= rim.max_slope)
+    flat = rho_px >= rim.flat_radius(r_px, s)
+    return SphereFields(p.astype(np.float32), q.astype(np.float32), depth.astype(np.float32),
+                        contact, trusted, flat, r_px)
+
+
+# -- contact detection -----------------------------------------------------------------------
+
+
+def change_map(image: np.ndarray, background: np.ndarray, sigma: float) -> np.ndarray:
+    """Blurred sum over channels of |image - background| (float32, H x W)."""
+    import cv2
+
+    d = np.abs(image.astype(np.float32) - background.astype(np.float32)).sum(axis=-1)
+    return cv2.GaussianBlur(d, (0, 0), sigma) if sigma > 0 else d
+
+
+def fit_circle(xs: np.ndarray, ys: np.ndarray) -> tuple[float, float, float]:
+    """Least-squares (algebraic) circle through points: (x, y, r)."""
+    xm, ym = xs.mean(), ys.mean()
+    u, v = xs - xm, ys - ym
+    a = np.column_stack([u, v, np.ones_like(u)])
+    b = u**2 + v**2
+    (c0, c1, c2), *_ = np.linalg.lstsq(a, b, rcond=None)
+    cx, cy = c0 / 2, c1 / 2
+    r = math.sqrt(max(c2 + cx**2 + cy**2, 0.0))
+    return float(cx + xm), float(cy + ym), r
+
+
+def _ray_peaks(m: np.ndarray, cx: float, cy: float, r_max: float, sigma: float,
+               n_rays: int = 120) -> tuple[np.ndarray, np.ndarray]:
+    """Where the change map peaks along rays from (cx, cy), out to r_max: points (xs, ys)."""
+    import cv2
+
+    radii = np.arange(1.0, r_max, 0.5, dtype=np.float32)
+    ang = np.linspace(0, 2 * np.pi, n_rays, endpoint=False, dtype=np.float32)
+    mx = (cx + np.cos(ang)[:, None] * radii[None, :]).astype(np.float32)
+    my = (cy + np.sin(ang)[:, None] * radii[None, :]).astype(np.float32)
+    vals = cv2.remap(m, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1)
+    inside = (mx >= 0) & (mx <= m.shape[1] - 1) & (my >= 0) & (my <= m.shape[0] - 1)
+    rows = np.arange(n_rays)
+    k = np.argmax(vals, axis=1)
+    # The edge is where the change falls fastest just past the peak (the blur moves the peak
+    # itself inwards): the steepest descent within 3 blur widths outside it.
+    drop = vals[:, :-1] - vals[:, 1:]
+    span = math.ceil(2 * (3 * sigma + 1))
+    j = np.arange(span)[None, :] + k[:, None]
+    j = np.minimum(j, drop.shape[1] - 1)
+    e = j[rows, np.argmax(drop[rows[:, None], j], axis=1)]
+    ok = (inside[rows, k] & (k > 0) & (e < radii.size - 2)
+          & inside[rows, np.minimum(e + 1, radii.size - 1)])
+    ex = (mx[rows, e] + mx[rows, e + 1]) / 2
+    ey = (my[rows, e] + my[rows, e + 1]) / 2
+    return ex[ok], ey[ok]
+
+
+def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | None = None,
+                  min_radius_px: float = 3.0) -> tuple[float, float, float] | None:
+    """The contact circle (x, y, r) px of a ball press, or None when no contact is visible.
+
+    Blur the change to the background, keep what stands clearly above the noise (6 robust
+    standard deviations and a fifth of the strongest change), take the convex hull of the
+    largest connected component (the flat top of the cap barely changes colour), then fit a
+    circle to the peak of the change along rays from its centroid, twice, dropping rays more
+    than 2.5 robust deviations off the circle.
+    """
+    import cv2
+
+    h, w = image.shape[:2]
+    if sigma is None:
+        sigma = max(1.0, min(h, w) / 240)
+    m = change_map(image, background, sigma)
+    med = float(np.median(m))
+    mad = float(np.median(np.abs(m - med))) * 1.4826 + 1e-3
+    peak = float(np.percentile(m, 99.99))
+    thr = max(med + 6 * mad, med + 0.2 * (peak - med), med + 3.0)
+    mask = m > thr
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    if n <= 1:
+        return None
+    best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    if stats[best, cv2.CC_STAT_AREA] < math.pi * min_radius_px**2:
+        return None
+    # The flat top of the cap and the side facing away from the lights change little, so the
+    # component can be a ring or a crescent: its convex hull stands for the contact.
+    pts = np.column_stack(np.nonzero(lab == best)[::-1]).astype(np.int32)
+    comp = np.zeros(m.shape, np.uint8)
+    cv2.fillConvexPoly(comp, cv2.convexHull(pts), 1)
+    area = int(comp.sum())
+    ys, xs = np.nonzero(comp)
+    cx, cy = float(xs.mean()), float(ys.mean())
+    r0 = math.sqrt(area / math.pi)
+    r = r0
+    for _ in range(3):
+        px, py = _ray_peaks(m, cx, cy, 1.5 * max(r0, r), sigma)
+        if px.size < 12:
+            return None
+        for _ in range(2):
+            cx2, cy2, r2 = fit_circle(px, py)
+            res = np.abs(np.hypot(px - cx2, py - cy2) - r2)
+            keep = res <= max(2.5 * 1.4826 * float(np.median(res)), 1.0)
+            if keep.sum() < 12:
+                break
+            px, py = px[keep], py[keep]
+        cx, cy, r = fit_circle(px, py)
+    if not (r >= min_radius_px and 0 <= cx < w and 0 <= cy < h):
+        return None
+    return cx, cy, r
