@@ -307,7 +307,7 @@ def calibrate(
     degree: Annotated[int | None, typer.Option(help="poly: colour degree (3).")] = None,
     pos_degree: Annotated[int | None, typer.Option(
         help="poly, mlp: degree of the position polynomial (2).")] = None,
-    width: Annotated[int | None, typer.Option(help="mlp: units per hidden layer (64).")] = None,
+    width: Annotated[int | None, typer.Option(help="mlp: units per hidden layer (32).")] = None,
     depth: Annotated[int | None, typer.Option(help="mlp: hidden layers (3).")] = None,
     epochs: Annotated[int | None, typer.Option(help="mlp: training epochs (40).")] = None,
 ) -> None:
