@@ -21,14 +21,18 @@ BUILD_ARGS = ("--shard-mb", str(SHARD_MB), "--quiet")
 
 
 def make_recordings(root: Path) -> Path:
-    """Simulate 6 static frames, 9 sequences of 8 frames and 6 presses, then calibrate (lut)."""
-    from vtsbench.depth.calibration import calibrate, save_calibration
+    """Simulate 6 static frames, 9 sequences of 8 frames and 6 presses, then calibrate (lut)
+    with `vtsbench calibrate RECORDINGS --out RECORDINGS/calibration.safetensors`."""
+    from typer.testing import CliRunner
+
+    from vtsbench.cli import app
     from vtsbench.sim.simulate import simulate
 
     simulate(root, seed=3, n_static=6, n_sequences=9, n_presses=6, size=SIZE, mm_per_px=0.08,
              n_sessions=3, progress=False)
-    run = calibrate(root, method="lut", device=None)
-    save_calibration(run.calibration, root / "calibration.safetensors")
+    res = CliRunner().invoke(app, ["calibrate", str(root), "--out",
+                                   str(root / "calibration.safetensors"), "--method", "lut"])
+    assert res.exit_code == 0, res.output
     return root
 
 
