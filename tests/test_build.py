@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -112,16 +113,25 @@ def test_loads_with_datasets_offline(built: Path, tmp_path: Path) -> None:
 
 
 def test_refuses_to_overwrite(built: Path, sim_recordings: Path, tmp_path: Path) -> None:
-    out = tmp_path / "ds"
-    out.mkdir()
-    (out / "keep.txt").write_text("mine")
-    res = CliRunner().invoke(app, ["build", str(sim_recordings), str(out), *BUILD_ARGS])
-    assert res.exit_code == 2
-    assert "already exists (use --overwrite" in res.output
-    assert (out / "keep.txt").read_text() == "mine"
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "keep.txt").write_text("mine")
+    for extra in ((), ("--overwrite",)):  # not a dataset: refused even with --overwrite
+        res = CliRunner().invoke(app, ["build", str(sim_recordings), str(mine), *BUILD_ARGS,
+                                       *extra])
+        assert res.exit_code == 2
+        assert ("not a vtsbench dataset" if extra else "already exists (use --overwrite") \
+            in res.output
+    assert (mine / "keep.txt").read_text() == "mine"
+    res = CliRunner().invoke(app, ["build", str(sim_recordings), str(sim_recordings.parent),
+                                   "--overwrite"])
+    assert res.exit_code == 2 and "the recordings folder is inside OUT" in res.output
+    out = Path(shutil.copytree(built, tmp_path / "ds"))
+    (out / "README.md").write_text("old")
     res = cli("build", str(sim_recordings), str(out), *BUILD_ARGS, "--overwrite")
     assert res.returncode == 0, res.stderr
     assert tree_bytes(out) == tree_bytes(built)  # a CLI build equals the in-process one
+    assert not any(p.name.startswith(".ds") for p in tmp_path.iterdir())
 
 
 def test_missing_calibration_says_how_to_make_one(sim_recordings: Path, tmp_path: Path) -> None:

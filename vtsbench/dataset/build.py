@@ -696,6 +696,24 @@ def _load_checked_calibration(path: Path, manifest: Manifest, plan_sessions: set
     return cal if cal is not None else load_calibration(path)
 
 
+def check_out(root: Path, out: Path, overwrite: bool) -> None:
+    """Refuse an existing OUT without --overwrite, and any OUT that --overwrite could make
+    destroy something other than a dataset: the recordings, or a folder that is not one."""
+    if out == root or root in out.parents:
+        raise VtsError("OUT must not be inside the recordings folder", out)
+    if out in root.parents:
+        raise VtsError("the recordings folder is inside OUT; choose another OUT", out)
+    if not out.exists() and not out.is_symlink():
+        return
+    if not overwrite:
+        raise VtsError("already exists (use --overwrite to replace it)", out)
+    from .schema import INFO_PATH
+
+    if not out.is_dir() or (any(out.iterdir()) and not (out / INFO_PATH).is_file()):
+        raise VtsError("exists and is not a vtsbench dataset (no meta/info.json); --overwrite "
+                       "replaces only datasets: remove it yourself or choose another OUT", out)
+
+
 def build(recordings: str | Path, out: str | Path, opts: BuildOptions | None = None,
           log: Callable[[str], None] | None = None) -> BuildResult:
     """Build the dataset of a recordings folder into OUT (atomic: complete or absent)."""
@@ -706,10 +724,7 @@ def build(recordings: str | Path, out: str | Path, opts: BuildOptions | None = N
     t0 = time.perf_counter()
     _check_options(opts)
     root, out = Path(recordings).resolve(), Path(out).resolve()
-    if out.exists() and not opts.overwrite:
-        raise VtsError("already exists (use --overwrite to replace it)", out)
-    if out == root or root in out.parents:
-        raise VtsError("OUT must not be inside the recordings folder", out)
+    check_out(root, out, opts.overwrite)
     manifest = load_manifest(root)
     cal_path = resolve_calibration(root, opts.calibration)
     bad, warnings = screen_entries(root, manifest, opts.frames, max(2, opts.workers))
@@ -910,7 +925,7 @@ def finish(stage: Path, out: Path, plan: Plan, splits: Any, *, manifest: Manifes
             top = rel.split("/")[0] if "/" in rel else "."
             sizes[top] = sizes.get(top, 0) + p.stat().st_size
     shutil.rmtree(stage / WORK)
-    if out.exists():
+    if out.exists():  # --overwrite of a dataset (check_out): swap, then delete the old one
         old = out.with_name(f".{out.name}.old")
         shutil.rmtree(old, ignore_errors=True)
         os.replace(out, old)

@@ -266,8 +266,9 @@ def verify(root: str | Path, *, decode: bool = True, progress: bool = False) -> 
     with _bar(progress) as bar:
         advance = None
         if bar is not None:
-            n_shards = sum(-(-info.shapes[k]["rgb"][0] // info.zarr.samples_per_shard[k])
-                           for k in info.shapes) * len(ARRAYS) if decode else 0
+            sps = info.zarr.samples_per_shard
+            n_shards = sum(-(-s.get("rgb", (0,))[0] // max(1, sps.get(k, 1)))
+                           for k, s in info.shapes.items()) * len(ARRAYS) if decode else 0
             t = bar.add_task("checking", total=len(info.files) + n_shards)
             advance = lambda n: bar.advance(t, n)  # noqa: E731
         check_files(root, info, report, advance)
