@@ -48,12 +48,13 @@ def test_index_rows_match_zarr_rows_and_depth_is_aligned(built: Path, sim_record
                                                          ) -> None:
     import zarr
 
-    from vtsbench.dataset.build import _calibration, depth_and_contact
+    from vtsbench.dataset.build import _calibration, depth_and_contact, sha256_file
     from vtsbench.dataset.index import read_index
     from vtsbench.dataset.store import depth_to_int16
     from vtsbench.recordings.media import read_frames
 
-    cal = _calibration(str(sim_recordings / "calibration.safetensors"))
+    cal_path = sim_recordings / "calibration.safetensors"
+    cal = _calibration(str(cal_path), sha256_file(cal_path))
     for kind in ("static", "slip"):
         metas = read_index(built / "index" / f"{kind}.parquet", kind)
         group = zarr.open_group(str(built / "data" / f"{kind}.zarr"), mode="r")

@@ -92,6 +92,7 @@ class ShardTask:
     layout: Layout
     samples: tuple[SampleSource, ...]
     calibration: str
+    calibration_sha: str
     solver: str
     fingerprint: str
 
@@ -329,7 +330,7 @@ def shard_tasks(plan: Plan, root: Path, stage: Path, calibration: Path, cal_sha:
                                for s in samples]}
             fp = hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
             tasks.append(ShardTask(kind, k, str(root), str(group), str(_marker(stage, kind, k)),
-                                   lay, samples, str(calibration), solver, fp))
+                                   lay, samples, str(calibration), cal_sha, solver, fp))
     return tasks
 
 
@@ -359,14 +360,16 @@ def shard_done(task: ShardTask) -> bool:
 _CALIBRATIONS: dict[str, Any] = {}
 
 
-def _calibration(path: str) -> Any:
-    """The calibration, loaded once per worker process."""
+def _calibration(path: str, sha: str) -> Any:
+    """The calibration, loaded once per worker process (per file content)."""
     from ..depth.calibration import load_calibration
 
-    if path not in _CALIBRATIONS:
+    if sha not in _CALIBRATIONS:
+        if sha256_file(Path(path)) != sha:
+            raise VtsError("calibration file changed during the build", path)
         _CALIBRATIONS.clear()
-        _CALIBRATIONS[path] = load_calibration(path)
-    return _CALIBRATIONS[path]
+        _CALIBRATIONS[sha] = load_calibration(path)
+    return _CALIBRATIONS[sha]
 
 
 #: The contact mask is estimated at 1/MASK_SCALE resolution with mask_from_images' parameters
@@ -432,7 +435,7 @@ def run_shard(task: ShardTask) -> ShardResult:
         frames.append(x if lay.frames else x[0])
     if bad:
         return ShardResult(task.kind, task.k, bad=bad)
-    cal = _calibration(task.calibration)
+    cal = _calibration(task.calibration, task.calibration_sha)
     rgb = np.stack(frames)
     depth = np.empty(rgb.shape[:-1], np.int16)
     contact = np.empty(rgb.shape[:-1], bool)
