@@ -848,12 +848,6 @@ def _checksummed(rel: str) -> bool:
     return rel.startswith(("data/", "index/", "meta/splits/"))
 
 
-def _umask_mode() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
 def build_params(manifest: Manifest, root: Path, cal_path: Path, opts: BuildOptions,
                  solver_note: str) -> dict[str, Any]:
     """The parameters recorded in info.json: what made the bytes, nothing about how it ran."""
@@ -893,9 +887,6 @@ def finish(stage: Path, out: Path, plan: Plan, splits: Any, *, manifest: Manifes
             if p.stem not in names:
                 p.unlink()
     split_sha = write_splits(split_dir, splits.splits)
-    mode = _umask_mode()
-    for name in split_sha:  # write_splits makes private (0600) temporaries
-        os.chmod(split_dir / f"{name}.json", mode)
     lay = plan.layouts
     info = DatasetInfo(
         name=manifest.name or root.name, vtsbench_version=package_version(),
