@@ -26,7 +26,8 @@ def test_help_runs_without_heavy_imports() -> None:
     assert "HEAVY=\n" in out.stdout + "\n" and "simulate" in out.stdout
 
 
-@pytest.mark.parametrize("cmd", ["simulate", "check", "manifest", "preview", "collect"])
+@pytest.mark.parametrize("cmd", ["simulate", "check", "manifest", "preview", "collect", "calibrate",
+                                 "depth", "build", "info", "verify"])
 def test_each_command_has_help(cmd: str) -> None:
     res = CliRunner().invoke(app, [cmd, "--help"])
     assert res.exit_code == 0 and "Usage" in res.output
