@@ -12,14 +12,13 @@ solver (dst, dct, masked) and scored with the plane-aligned RMSE over the true c
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from machine import machine  # benchmarks/machine.py: the shared machine line
 
 from vtsbench.depth.calibration import calibrate, evaluate_press, load_presses, taxim_recordings
 from vtsbench.depth.reconstruct import reconstruct
@@ -28,23 +27,6 @@ METHODS = ("lut", "poly", "mlp")
 SOLVERS = ("dst", "dct", "masked")
 TAXIM = (Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "taxim_gelsight_ball"
          / "dataPack_small.npz")
-
-
-def machine() -> str:
-    """Core count and CPU model (from /proc/cpuinfo where there is one)."""
-    model = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    import torch
-
-    return (f"{os.cpu_count()} cores, {model}; Python {platform.python_version()}, "
-            f"numpy {np.__version__}, torch {torch.__version__} ({torch.get_num_threads()} "
-            f"threads), CUDA {'yes' if torch.cuda.is_available() else 'no'}")
 
 
 def fps(cal, frames: np.ndarray, solver: str, device: str | None, repeats: int = 2) -> float:

@@ -15,8 +15,6 @@ workers. Prints a markdown table and the machine; removes everything it wrote.
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import shutil
 import sys
 import tempfile
@@ -30,25 +28,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from machine import machine  # benchmarks/machine.py: the shared machine line
+
 import vtsbench
 from vtsbench.dataset.loader import View
 from vtsbench.dataset.store import DEPTH_SCALE_MM, depth_to_int16
 
 Reader = Callable[[int], tuple[np.ndarray, np.ndarray]]
-
-
-def machine() -> str:
-    """Core count and CPU model (from /proc/cpuinfo where there is one)."""
-    model = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return (f"{os.cpu_count()} cores, {model}; Python {platform.python_version()}, "
-            f"numpy {np.__version__}")
 
 
 def build_dataset(work: Path, sequences: int, size: tuple[int, int]) -> Path:

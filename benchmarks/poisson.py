@@ -17,8 +17,6 @@ Prints markdown tables and the machine.
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import sys
 import time
 from collections.abc import Callable
@@ -30,35 +28,12 @@ from scipy import ndimage
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from machine import machine  # benchmarks/machine.py: the shared machine line
+
 from vtsbench.depth.mask import mask_from_gradients
 from vtsbench.depth.poisson import divergence, integrate, staggered
 
 RADIUS_MM = 3.0
-
-
-def machine() -> str:
-    """Core count and CPU model (from /proc/cpuinfo where there is one), library versions."""
-    model = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    text = (f"{os.cpu_count()} cores, {model}; Python {platform.python_version()}, "
-            f"numpy {np.__version__}, scipy {scipy.__version__}")
-    try:
-        import torch
-
-        text += f", torch {torch.__version__} ({torch.get_num_threads()} threads)"
-        if torch.cuda.is_available():
-            text += f", CUDA {torch.cuda.get_device_name(0)}"
-    except ImportError:
-        text += ", no torch"
-    if hasattr(os, "getloadavg"):
-        text += f"; load average {os.getloadavg()[0]:.1f} at start"
-    return text
 
 
 def contact_mask(size: tuple[int, int], share: float, seed: int = 0) -> np.ndarray:

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 import tempfile
 import time
@@ -22,6 +21,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from machine import machine  # benchmarks/machine.py: the shared machine line
 
 from vtsbench.recordings.media import write_png
 from vtsbench.recordings.truth import Truth, write_truth
@@ -36,20 +37,6 @@ from vtsbench.sim.plan import (
 from vtsbench.sim.scene import Effects, Scene, render
 
 KINDS = ("static frame", "held sequence", "press sequence", "slip sequence", "calibration press")
-
-
-def machine() -> str:
-    """Core count and CPU model (from /proc/cpuinfo where there is one)."""
-    model = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return (f"{os.cpu_count()} cores, {model}; Python {platform.python_version()}, "
-            f"numpy {np.__version__}")
 
 
 def make_scenes(kind: str, n: int, size: tuple[int, int], mm_per_px: float,
