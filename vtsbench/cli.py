@@ -38,6 +38,20 @@ def _run(fn, *args, **kwargs):
         raise typer.Exit(130) from None
 
 
+def _report(problems: list[str], warnings: list[str], summary: str) -> None:
+    """Print warnings, problems (one line each) and a summary; exit 1 if there is a problem."""
+    from rich.console import Console
+
+    console = Console(highlight=False)
+    for w in warnings:
+        console.print(f"[yellow]warning[/] {w}", soft_wrap=True)
+    for p in problems:
+        console.print(f"[red]problem[/] {p}", soft_wrap=True)
+    console.print(summary)
+    if problems:
+        raise typer.Exit(1)
+
+
 def _parse_size(text: str) -> tuple[int, int]:
     try:
         h, w = (int(v) for v in text.lower().split("x"))
@@ -93,20 +107,13 @@ def check(
     frame ranges inside the video or folder, resolution as the session says, labels in range
     and consistent (a direction only on a slip), presses with a ball radius.
     """
-    from rich.console import Console
 
     from .recordings.check import check_folder
 
     report = _run(check_folder, folder, deep=deep, workers=workers)
-    console = Console(stderr=False, highlight=False)
-    for w in report.warnings:
-        console.print(f"[yellow]warning[/] {w}", soft_wrap=True)
-    for p in report.problems:
-        console.print(f"[red]problem[/] {p}", soft_wrap=True)
-    console.print(f"{report.n_entries} entries, {report.n_frames} frames checked: "
-                  f"{len(report.problems)} problem(s), {len(report.warnings)} warning(s)")
-    if report.problems:
-        raise typer.Exit(1)
+    _report(report.problems, report.warnings,
+            f"{report.n_entries} entries, {report.n_frames} frames checked: "
+            f"{len(report.problems)} problem(s), {len(report.warnings)} warning(s)")
 
 
 @app.command()
@@ -265,18 +272,12 @@ def verify(
 ) -> None:
     """Check a dataset: every file's sha256, info.json and split schemas, index and array shapes,
     split leaks, and decode every chunk; exit 1 on any problem."""
-    from rich.console import Console
 
     from .dataset.verify import verify as run_verify
 
     report = _run(run_verify, dataset, decode=not quick, progress=True)
-    console = Console(highlight=False)
-    for p in report.problems:
-        console.print(f"[red]problem[/] {p}", soft_wrap=True)
-    console.print(f"{report.files} files, {report.samples} samples, {report.shards} shards "
-                  f"checked: {len(report.problems)} problem(s)")
-    if report.problems:
-        raise typer.Exit(1)
+    _report(report.problems, [], f"{report.files} files, {report.samples} samples, "
+            f"{report.shards} shards checked: {len(report.problems)} problem(s)")
 
 
 @app.command()
