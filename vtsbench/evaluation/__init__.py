@@ -1,0 +1,1 @@
+"""Scoring: metrics (pure numpy), submission reading and validation, reports and leaderboards."""
