@@ -386,6 +386,100 @@ def depth(
     typer.echo(f"wrote {n} depth map(s) to {out}")
 
 
+@app.command("eval")
+def eval_(
+    submission: Annotated[Path, typer.Argument(help="Predictions: CSV or parquet.")],
+    dataset: Annotated[Path, typer.Option(help="Dataset folder (made by vtsbench build).")],
+    split: Annotated[str, typer.Option(help="Split scheme, e.g. unseen_objects or seen.")],
+    part: Annotated[str, typer.Option(help="Part of the split to score.")] = "test",
+    out: Annotated[Path | None, typer.Option(
+        help="Write metrics.json, report.md and confusion-matrix PNGs here.")] = None,
+    meta: Annotated[Path | None, typer.Option(
+        help="Metadata JSON (default: SUBMISSION.meta.json beside it).")] = None,
+    figures: Annotated[bool, typer.Option(help="Write the PNGs (with --out).")] = True,
+) -> None:
+    """Validate a submission, score it and print a short table; exit 2 listing every problem.
+
+    Example: [bold]vtsbench eval preds.csv --dataset data/ds --split unseen_objects --out ev[/]
+    """
+    from .evaluation.report import SUMMARY_HEAD, evaluate, summary_rows
+
+    doc, _, _ = _run(evaluate, submission, dataset, split, part, out=out, meta=meta,
+                     figures=figures)
+    _print_rows(f"{doc['submission']['method']} on {doc['split']}/{doc['part']} "
+                f"(metric version {doc['metric_version']})", SUMMARY_HEAD, summary_rows(doc))
+    d = doc["tasks"].get("direction")
+    if d:
+        s = d["summary"]
+        e2e, mae = s["end_to_end_accuracy"]["mean"], s["mean_abs_angular_error_deg"]["mean"]
+        typer.echo(f"direction: end to end {'-' if e2e is None else f'{100 * e2e:.2f} %'}, "
+                   f"within one bin {100 * (s['within_one_bin']['mean'] or 0):.2f} %, "
+                   f"angular error {'-' if mae is None else f'{mae:.1f}'} deg")
+    if out is not None:
+        typer.echo(f"wrote {out}/metrics.json and report.md")
+
+
+def _print_rows(title: str, head: tuple[str, ...], rows: list[tuple[str, ...]]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=title, title_justify="left")
+    for i, c in enumerate(head):
+        t.add_column(c, justify="left" if i in (0, len(head) - 1) else "right")
+    for r in rows:
+        t.add_row(*r)
+    Console(highlight=False).print(t)
+
+
+leaderboard_app = typer.Typer(help="Leaderboards in leaderboards/<dataset>/<split>/: add, "
+                                   "render, rescore.", no_args_is_help=True)
+app.add_typer(leaderboard_app, name="leaderboard")
+_ROOT = Annotated[Path, typer.Option("--root", help="Leaderboards folder.")]
+
+
+@leaderboard_app.command("add")
+def leaderboard_add(
+    submission: Annotated[Path, typer.Argument(help="Predictions: CSV or parquet.")],
+    dataset: Annotated[Path, typer.Option(help="Dataset folder.")],
+    split: Annotated[str, typer.Option(help="Split scheme.")],
+    part: Annotated[str, typer.Option(help="Part of the split.")] = "test",
+    meta: Annotated[Path | None, typer.Option(help="Metadata JSON.")] = None,
+    root: _ROOT = Path("leaderboards"),
+    replace: Annotated[bool, typer.Option(help="Replace the same submission's entry.")] = False,
+) -> None:
+    """Score a submission and store it (predictions included) as a leaderboard entry."""
+    from .evaluation.leaderboard import add, render
+
+    path = _run(add, submission, dataset, split, part, root=root, meta=meta, replace=replace)
+    _run(render, root)
+    typer.echo(f"added {path}; rendered {path.parent / 'leaderboard.md'}")
+
+
+@leaderboard_app.command("render")
+def leaderboard_render(root: _ROOT = Path("leaderboards")) -> None:
+    """Write leaderboard.md (summary with the paper's reference row, per-task detail) in every
+    dataset/split folder and print them."""
+    from .evaluation.leaderboard import render
+
+    for path, text in _run(render, root).items():
+        typer.echo(f"<!-- {path} -->\n{text}")
+
+
+@leaderboard_app.command("rescore")
+def leaderboard_rescore(
+    dataset: Annotated[Path, typer.Option(help="The dataset the entries were scored on.")],
+    root: _ROOT = Path("leaderboards"),
+    force: Annotated[bool, typer.Option(help="Re-score entries of the current metric version "
+                                            "too.")] = False,
+) -> None:
+    """Re-score stored entries whose metric version is not the current one, then re-render."""
+    from .evaluation.leaderboard import render, rescore
+
+    changed = _run(rescore, root, dataset, force=force)
+    _run(render, root)
+    typer.echo(f"re-scored {len(changed)} entr{'y' if len(changed) == 1 else 'ies'}")
+
+
 # -- collect: registered below --
 
 

@@ -1,0 +1,139 @@
+"""`vtsbench eval` and `vtsbench leaderboard` end to end on the small built dataset."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from vtsbench.cli import app
+from vtsbench.dataset.schema import SCHEMA_DIR, load_info
+from vtsbench.evaluation import metrics as M
+from vtsbench.evaluation.leaderboard import entry_schema_errors
+from vtsbench.evaluation.submission import load_truth
+
+pytest_plugins = ["loader_conftest"]
+runner = CliRunner()
+
+
+def slip_split(ds: Path) -> tuple[str, str]:
+    """A slip split and a part of it with slipping samples."""
+    for split in ("unseen_objects", "seen"):
+        if split in load_info(ds).splits:
+            for part in ("test", "train"):
+                try:
+                    t = load_truth(ds, split, part)
+                except Exception:
+                    continue
+                if (t.labels["state"] == 2).any():
+                    return split, part
+    pytest.skip("no slip split with slips in the test dataset")
+
+
+def write_submission(ds: Path, folder: Path, split: str, part: str, wrong: int = 0,
+                     method: str = "toy", names: bool = False) -> Path:
+    """Predictions equal to the truth except the direction of the first `wrong` slips (+1)."""
+    t = load_truth(ds, split, part)
+    info = load_info(ds)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{method}.csv"
+    slips = np.flatnonzero(t.labels["state"] == 2)
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["sample_id", "task", "pred"])
+        for i, s in enumerate(t.ids):
+            st = int(t.labels["state"][i])
+            w.writerow([s, "state", t.names["state"][st] if names else st])
+            d = int(t.labels["direction"][i])
+            if d >= 0:
+                w.writerow([s, "direction", (d + (1 if i in slips[:wrong] else 0)) % 8])
+    (folder / f"{method}.meta.json").write_text(json.dumps({
+        "method": method, "recipe": "recipes/toy.yaml", "seeds": [0],
+        "dataset_version": info.dataset_version, "dataset_sha256": info.dataset_sha256}))
+    return path
+
+
+def test_eval_end_to_end(vts_dataset: Path, tmp_path: Path) -> None:
+    import jsonschema
+
+    split, part = slip_split(vts_dataset)
+    sub = write_submission(vts_dataset, tmp_path / "sub", split, part, wrong=1, names=True)
+    out = tmp_path / "ev"
+    res = runner.invoke(app, ["eval", str(sub), "--dataset", str(vts_dataset), "--split", split,
+                              "--part", part, "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "state" in res.output and "direction" in res.output and "100.00" in res.output
+    doc = json.loads((out / "metrics.json").read_text())
+    jsonschema.validate(doc, json.loads((SCHEMA_DIR / "metrics.schema.json").read_text()))
+    assert doc["metric_version"] == M.METRIC_VERSION
+    assert doc["tasks"]["state"]["runs"][0]["accuracy"] == 1.0
+    d = doc["tasks"]["direction"]["runs"][0]
+    assert d["error_bins"][1] == 1 and d["within_one_bin"] == 1.0
+    assert d["adjacent_error_share"] == 1.0
+    assert d["end_to_end_accuracy"] == d["accuracy"] < 1.0
+    for task in ("state", "direction"):
+        for kind in ("counts", "normalised"):
+            assert (out / f"confusion_{task}_{kind}.png").stat().st_size > 1000
+    report = (out / "report.md").read_text()
+    assert "## Direction" in report and "→ E" in report
+
+
+def test_eval_malformed_exits_2(vts_dataset: Path, tmp_path: Path) -> None:
+    split, part = slip_split(vts_dataset)
+    sub = write_submission(vts_dataset, tmp_path, split, part)
+    sub.write_text(sub.read_text() + "nope,state,0\n")
+    res = runner.invoke(app, ["eval", str(sub), "--dataset", str(vts_dataset), "--split", split,
+                              "--part", part])
+    assert res.exit_code == 2
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {sub}")
+    assert f"ids not in split {split}/{part}: 1 (first: nope)" in lines[0]
+    res = runner.invoke(app, ["eval", str(sub), "--dataset", str(vts_dataset), "--split", "x"])
+    assert res.exit_code == 2 and "no split 'x'" in res.output
+
+
+def test_leaderboard_add_render_rescore(vts_dataset: Path, tmp_path: Path,
+                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    split, part = slip_split(vts_dataset)
+    root = tmp_path / "lb"
+    for method, wrong in (("good", 0), ("worse", 1)):
+        sub = write_submission(vts_dataset, tmp_path / method, split, part, wrong, method)
+        res = runner.invoke(app, ["leaderboard", "add", str(sub), "--dataset", str(vts_dataset),
+                                  "--split", split, "--part", part, "--root", str(root)])
+        assert res.exit_code == 0, res.output
+    res = runner.invoke(app, ["leaderboard", "add", str(sub), "--dataset", str(vts_dataset),
+                              "--split", split, "--part", part, "--root", str(root)])
+    assert res.exit_code == 2 and "already on the leaderboard" in res.output
+    name = load_info(vts_dataset).name
+    entry_files = sorted((root / name / split).glob("*.json"))
+    assert len(entry_files) == 2
+    for p in entry_files:
+        assert entry_schema_errors(json.loads(p.read_text())) == []
+    md = (root / name / split / "leaderboard.md").read_text()
+    assert md.index("| good |") < md.index("| worse |")
+    if split in ("seen", "unseen_objects"):
+        assert "paper (reference)" in md
+    assert "| 1.0 |" in md
+
+    # a metric correction: a new version and a changed definition of within-one-bin
+    original = M.direction_metrics
+
+    def corrected(t, p):
+        return {**original(t, p), "within_one_bin": 0.125}
+
+    monkeypatch.setattr(M, "METRIC_VERSION", "1.1")
+    monkeypatch.setattr(M, "direction_metrics", corrected)
+    res = runner.invoke(app, ["leaderboard", "rescore", "--dataset", str(vts_dataset),
+                              "--root", str(root)])
+    assert res.exit_code == 0, res.output
+    assert "re-scored 2 entries" in res.output
+    md2 = (root / name / split / "leaderboard.md").read_text()
+    assert "| 1.1 |" in md2 and "| 1.0 |" not in md2 and "| 12.50 |" in md2 and md2 != md
+    e = json.loads(entry_files[0].read_text())
+    assert e["rescored_from"] == ["1.0"] and e["metric_version"] == "1.1"
+    res = runner.invoke(app, ["leaderboard", "render", "--root", str(root)])
+    assert res.exit_code == 0 and "12.50" in res.output

@@ -1,0 +1,233 @@
+"""Leaderboards: `leaderboards/<dataset>/<split>/<entry id>.json`, one entry per submission with
+its predictions kept, so that every entry can be re-scored when the metrics change; rendered
+as markdown (a paper-style summary with the paper's figures as a reference row, and per-task
+detail) into `leaderboard.md` beside the entries."""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import re
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..atomic import write_text_atomic
+from ..errors import VtsError
+from . import metrics as M
+from .report import evaluate, pct, score
+from .submission import Submission, load_truth
+
+ENTRY_VERSION = 1
+#: The paper's figures (accuracy %), by split, shown as a reference row.
+PAPER: dict[str, dict[str, float]] = {
+    "seen": {"state": 99.68, "direction": 96.95},
+    "unseen_objects": {"state": 95.5, "direction": 91.5},
+    "static_sessions": {"object": 98.80},
+    "static_locations": {"object": 98.80},
+}
+PAPER_NOTE = ("Paper: TimeSformer (RGB) on the authors' real recordings; their splits, not these "
+              "files, so the row is a reference, not a comparable entry. Static: ResNet-50 RGB.")
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-")[:40] or "entry"
+
+
+def entry_schema_errors(doc: Any) -> list[str]:
+    """Violations of schemas/leaderboard_entry.schema.json (which refers to metrics.schema)."""
+    import jsonschema
+    from referencing import Registry, Resource
+
+    from ..dataset.schema import SCHEMA_DIR
+
+    sch = json.loads((SCHEMA_DIR / "leaderboard_entry.schema.json").read_text())
+    ms = json.loads((SCHEMA_DIR / "metrics.schema.json").read_text())
+    reg = Registry().with_resource(ms["$id"], Resource.from_contents(ms))
+    v = jsonschema.Draft202012Validator(sch, registry=reg)
+    return [f"{'.'.join(map(str, e.absolute_path)) or '(top level)'}: {e.message}"
+            for e in v.iter_errors(doc)]
+
+
+def add(submission: str | Path, dataset: str | Path, split: str, part: str = "test",
+        root: str | Path = "leaderboards", meta: str | Path | None = None,
+        replace: bool = False) -> Path:
+    """Score a submission and store it as a leaderboard entry; returns the entry's path."""
+    doc, sub, truth = evaluate(submission, dataset, split, part, meta=meta)
+    folder = Path(root) / _slug(truth.dataset) / split
+    eid = f"{_slug(str(sub.meta['method']))}-{sub.sha256[:8]}"
+    path = folder / f"{eid}.json"
+    if path.exists() and not replace:
+        raise VtsError("this submission is already on the leaderboard (use --replace)", path)
+    entry = {
+        "entry_version": ENTRY_VERSION, "id": eid,
+        "added": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+        "method": sub.meta["method"], "recipe": sub.meta.get("recipe"), "seeds": sub.seeds,
+        "meta": sub.meta, "submission_sha256": sub.sha256,
+        "dataset": doc["dataset"], "split": split, "part": part,
+        "metric_version": doc["metric_version"], "vtsbench_version": doc["vtsbench_version"],
+        "metrics": doc["tasks"], "rescored_from": [],
+        "predictions": {"sample_ids": truth.ids, "tasks": {
+            t: {str(s): a.tolist() for s, a in by.items()} for t, by in sub.preds.items()}},
+    }
+    folder.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(path, json.dumps(entry, indent=1) + "\n")
+    return path
+
+
+def entries(folder: Path) -> list[tuple[Path, dict[str, Any]]]:
+    """The entries of one dataset/split folder, each checked against its schema."""
+    out = []
+    for p in sorted(folder.glob("*.json")):
+        try:
+            doc = json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError) as e:
+            raise VtsError(f"unreadable leaderboard entry ({e})", p) from None
+        errs = entry_schema_errors(doc)
+        if errs:
+            raise VtsError(f"invalid leaderboard entry: {errs[0]}", p)
+        out.append((p, doc))
+    return out
+
+
+def split_folders(root: str | Path) -> list[Path]:
+    """Every <dataset>/<split> folder under root that holds entries."""
+    return sorted({p.parent for p in Path(root).glob("*/*/*.json")})
+
+
+def rescore(root: str | Path, dataset: str | Path, force: bool = False) -> list[Path]:
+    """Re-score the entries of a dataset whose metric version is not the current one (all with
+    force) from their stored predictions; returns the entries changed."""
+    from ..dataset.schema import load_info
+
+    info = load_info(dataset)
+    changed = []
+    for folder in split_folders(root):
+        for path, e in entries(folder):
+            if e["dataset"]["name"] != info.name:
+                continue
+            if e["metric_version"] == M.METRIC_VERSION and not force:
+                continue
+            if e["dataset"]["dataset_sha256"] != info.dataset_sha256:
+                raise VtsError("entry was scored on another copy of the dataset (sha256 "
+                               f"{e['dataset']['dataset_sha256'][:12]}, this one "
+                               f"{info.dataset_sha256[:12]})", path)
+            truth = load_truth(dataset, e["split"], e["part"])
+            stored = e["predictions"]
+            pos = {s: i for i, s in enumerate(stored["sample_ids"])}
+            order = np.array([pos[s] for s in truth.ids], dtype=np.int64)
+            preds = {t: {int(s): np.asarray(a, np.int64)[order] for s, a in by.items()}
+                     for t, by in stored["tasks"].items()}
+            sub = Submission(path, e["meta"], e["submission_sha256"], preds)
+            doc = score(truth, sub)
+            if e["metric_version"] != doc["metric_version"]:
+                e["rescored_from"].append(e["metric_version"])
+            e.update(metric_version=doc["metric_version"], metrics=doc["tasks"],
+                     vtsbench_version=doc["vtsbench_version"])
+            write_text_atomic(path, json.dumps(e, indent=1) + "\n")
+            changed.append(path)
+    return changed
+
+
+def _mean(e: dict[str, Any], task: str, metric: str) -> float | None:
+    t = e["metrics"].get(task)
+    return None if t is None else t["summary"].get(metric, {}).get("mean")
+
+
+def _acc(e: dict[str, Any], task: str) -> str:
+    t = e["metrics"].get(task)
+    if t is None:
+        return "-"
+    s = t["summary"]["accuracy"]
+    return pct(s["mean"]) + (f" ± {100 * s['std']:.2f}" if s["std"] is not None else "")
+
+
+def _worst(e: dict[str, Any], task: str) -> str:
+    t = e["metrics"].get(task)
+    w = t["runs"][0].get("worst_object") if t else None
+    return "-" if not w else f"{w['object']} {pct(w['accuracy'])}"
+
+
+Column = tuple[str, Callable[[dict[str, Any]], str]]
+
+
+def _summary_columns(kind: str) -> list[Column]:
+    head: list[Column] = [("method", lambda e: e["method"]),
+                          ("recipe", lambda e: e.get("recipe") or "-"),
+                          ("seeds", lambda e: str(len(e["seeds"])))]
+    if kind == "slip":
+        mae = lambda e: "-" if _mean(e, "direction", "mean_abs_angular_error_deg") is None \
+            else f"{_mean(e, 'direction', 'mean_abs_angular_error_deg'):.1f}"  # noqa: E731
+        head += [("state %", lambda e: _acc(e, "state")),
+                 ("direction % (state given)", lambda e: _acc(e, "direction")),
+                 ("direction % end to end",
+                  lambda e: pct(_mean(e, "direction", "end_to_end_accuracy"))),
+                 ("within one bin %", lambda e: pct(_mean(e, "direction", "within_one_bin"))),
+                 ("angular error (deg)", mae),
+                 ("worst object, state %", lambda e: _worst(e, "state"))]
+    else:
+        head += [("object %", lambda e: _acc(e, "object")),
+                 ("balanced %", lambda e: pct(_mean(e, "object", "balanced_accuracy"))),
+                 ("macro-F1 %", lambda e: pct(_mean(e, "object", "macro_f1"))),
+                 ("worst object %", lambda e: _worst(e, "object"))]
+    return [*head, ("metric version", lambda e: e["metric_version"])]
+
+
+def _table(cols: list[Column], rows: list[dict[str, Any]]) -> list[str]:
+    out = ["| " + " | ".join(c for c, _ in cols) + " |", "|---" * len(cols) + "|"]
+    return out + ["| " + " | ".join(str(f(r)).replace("|", "/") for _, f in cols) + " |"
+                  for r in rows]
+
+
+def render_folder(folder: Path) -> str:
+    """The markdown of one dataset/split folder."""
+    es = [e for _, e in entries(folder)]
+    if not es:
+        return ""
+    kind = "slip" if any(t in es[0]["metrics"] for t in ("state", "direction")) else "static"
+    main = "state" if kind == "slip" else "object"
+    es.sort(key=lambda e: -(_mean(e, main, "accuracy") or -1.0))
+    split = es[0]["split"]
+    lines = [f"# {es[0]['dataset']['name']} / {split} ({es[0]['part']})", "",
+             f"{len(es)} entries, best {main} accuracy first; mean ± standard deviation over "
+             "seeds where there are several.", ""]
+    cols = _summary_columns(kind)
+    lines += _table(cols, es)
+    if split in PAPER:
+        ref = PAPER[split]
+        cells = {"method": "paper (reference)", "recipe": "-", "seeds": "-"}
+        cells.update({"state %": ref.get("state"), "direction % (state given)":
+                      ref.get("direction"), "object %": ref.get("object")})
+        lines.append("| " + " | ".join("-" if cells.get(c) is None else str(cells[c])
+                                        for c, _ in cols) + " |")
+        lines += ["", f"_{PAPER_NOTE}_"]
+    for task in ("state", "direction", "object"):
+        rows = [e for e in es if task in e["metrics"]]
+        if not rows:
+            continue
+        det: list[Column] = [
+            ("method", lambda e: e["method"]),
+            ("n", lambda e, t=task: str(e["metrics"][t]["runs"][0]["n"])),
+            ("accuracy %", lambda e, t=task: _acc(e, t)),
+            ("95 % CI (first seed)", lambda e, t=task: "[{}, {}]".format(
+                *map(pct, e["metrics"][t]["runs"][0]["accuracy_ci95"]))),
+            ("balanced %", lambda e, t=task: pct(_mean(e, t, "balanced_accuracy"))),
+            ("macro-F1 %", lambda e, t=task: pct(_mean(e, t, "macro_f1"))),
+            ("worst object %", lambda e, t=task: _worst(e, t))]
+        if task == "direction":
+            det.insert(6, ("adjacent share of errors %",
+                           lambda e: pct(_mean(e, "direction", "adjacent_error_share"))))
+        lines += ["", f"## {task}", "", *_table(det, rows)]
+    return "\n".join(lines) + "\n"
+
+
+def render(root: str | Path = "leaderboards") -> dict[Path, str]:
+    """Write leaderboard.md in every dataset/split folder under root; {path: markdown}."""
+    out = {}
+    for folder in split_folders(root):
+        text = render_folder(folder)
+        write_text_atomic(folder / "leaderboard.md", text)
+        out[folder / "leaderboard.md"] = text
+    return out

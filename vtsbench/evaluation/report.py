@@ -1,0 +1,219 @@
+"""Scoring a validated submission: metrics.json (with the metric version), report.md and
+confusion-matrix PNGs (counts and row-normalised; directions drawn as compass arrows)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..atomic import write_text_atomic
+from . import metrics as M
+from .submission import SLIP, Submission, Truth, load_submission, load_truth
+
+#: Metrics summarised over seeds (mean and spread) per task.
+HEADLINE = {
+    "state": ("accuracy", "balanced_accuracy", "macro_f1"),
+    "direction": ("accuracy", "balanced_accuracy", "macro_f1", "within_one_bin",
+                  "mean_abs_angular_error_deg", "adjacent_error_share", "end_to_end_accuracy"),
+    "object": ("accuracy", "balanced_accuracy", "macro_f1"),
+}
+ARROWS = ("→", "↗", "↑", "↖", "←", "↙", "↓", "↘")
+COMPASS = ("E", "NE", "N", "NW", "W", "SW", "S", "SE")
+
+
+def score_run(truth: Truth, preds: dict[str, np.ndarray], seed: int = 0) -> dict[str, Any]:
+    """Metrics of one seed's predictions (task -> class per truth position, -1 = none)."""
+    out: dict[str, Any] = {}
+    objects = np.asarray(truth.objects)
+    for task, pred in preds.items():
+        req = truth.required(task)
+        true = truth.labels[task][req]
+        rep = M.classification_report(true, pred[req], len(truth.names[task]),
+                                      groups=objects[req].tolist(), seed=seed)
+        if task == "direction":
+            rep.update(M.direction_metrics(true, pred[req]))
+            st = truth.labels["state"]
+            sp = preds.get("state")
+            c = M.cascade(st, sp if sp is not None else np.full_like(st, -1),
+                          truth.labels["direction"], pred)
+            rep["end_to_end_accuracy"] = c["end_to_end_accuracy"] if sp is not None else M.NAN
+            rep["slips_missed_by_state"] = c["slips_missed_by_state"] if sp is not None \
+                else M.NAN
+            rep["state_given_accuracy"] = c["state_given_accuracy"]
+            if sp is not None and len(req) > 1:
+                ok = ((pred[req] == true) & (sp[req] == SLIP)).astype(float)
+                idx = M.bootstrap_indices(len(req), seed=seed)
+                rep["end_to_end_accuracy_ci95"] = M.interval(ok[idx].mean(1))
+            else:
+                rep["end_to_end_accuracy_ci95"] = [rep["end_to_end_accuracy"]] * 2
+        rep["labels"] = list(truth.names[task])
+        out[task] = rep
+    return out
+
+
+def score(truth: Truth, sub: Submission) -> dict[str, Any]:
+    """The metrics document of a submission: per task, one run per seed and a seed summary."""
+    tasks: dict[str, Any] = {}
+    for task in [t for t in HEADLINE if t in sub.preds]:
+        runs = []
+        for seed in sorted(sub.preds[task]):
+            run = score_run(truth, {t: sub.preds[t][seed] for t in sub.preds
+                                    if seed in sub.preds[t]}, seed)[task]
+            runs.append({"seed": seed, **run})
+        tasks[task] = {"runs": runs, "summary": {
+            m: M.seed_summary([r.get(m) for r in runs]) for m in HEADLINE[task]}}
+    return M.jsonable({
+        "metric_version": M.METRIC_VERSION,
+        "vtsbench_version": _version(),
+        "dataset": {"name": truth.dataset, "dataset_version": truth.dataset_version,
+                    "dataset_sha256": truth.dataset_sha256},
+        "split": truth.split, "part": truth.part, "kind": truth.kind,
+        "n_samples": len(truth.ids),
+        "submission": {"file": sub.path.name, "sha256": sub.sha256,
+                       "method": sub.meta.get("method"), "recipe": sub.meta.get("recipe"),
+                       "seeds": sub.seeds},
+        "tasks": tasks,
+    })
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("vtsbench")
+    except PackageNotFoundError:  # pragma: no cover - running from a source tree
+        return "0+unknown"
+
+
+def pct(v: Any) -> str:
+    return "-" if v is None else f"{100 * v:.2f}"
+
+
+def summary_rows(doc: dict[str, Any]) -> list[tuple[str, ...]]:
+    """(task, n, accuracy %, 95 % interval, balanced %, macro-F1 %, worst object) per task."""
+    rows = []
+    for task, t in doc["tasks"].items():
+        r0 = t["runs"][0]
+        acc = t["summary"]["accuracy"]
+        spread = f" ± {100 * acc['std']:.2f}" if acc["std"] is not None else ""
+        ci = r0["accuracy_ci95"]
+        w = r0.get("worst_object")
+        rows.append((task, str(r0["n"]), pct(acc["mean"]) + spread,
+                     f"[{pct(ci[0])}, {pct(ci[1])}]",
+                     pct(t["summary"]["balanced_accuracy"]["mean"]),
+                     pct(t["summary"]["macro_f1"]["mean"]),
+                     "-" if not w else f"{w['object']} {pct(w['accuracy'])}"))
+    return rows
+
+
+SUMMARY_HEAD = ("task", "n", "accuracy %", "95 % CI (seed 1st)", "balanced %", "macro-F1 %",
+                "worst object %")
+
+
+def render_markdown(doc: dict[str, Any], figures: list[str]) -> str:
+    """report.md: the summary, direction metrics, per-object accuracy, confusion matrices."""
+    sub = doc["submission"]
+    lines = [f"# Evaluation: {sub['method'] or sub['file']}", "",
+             f"- dataset: {doc['dataset']['name']} {doc['dataset']['dataset_version']} "
+             f"(sha256 {doc['dataset']['dataset_sha256'][:12]})",
+             f"- split: {doc['split']} / {doc['part']} ({doc['n_samples']} {doc['kind']} samples)",
+             f"- submission: {sub['file']} (sha256 {sub['sha256'][:12]}), seeds "
+             f"{', '.join(map(str, sub['seeds']))}",
+             f"- metric version {doc['metric_version']}, vtsbench {doc['vtsbench_version']}", "",
+             "| " + " | ".join(SUMMARY_HEAD) + " |", "|---" * len(SUMMARY_HEAD) + "|"]
+    lines += ["| " + " | ".join(r) + " |" for r in summary_rows(doc)]
+    d = doc["tasks"].get("direction")
+    if d:
+        s = d["summary"]
+        r0 = d["runs"][0]
+
+        def f(m: str) -> str:
+            return pct(s[m]["mean"])
+
+        mae = s["mean_abs_angular_error_deg"]["mean"]
+        lines += ["", "## Direction (on the truly slipping sequences)", "",
+                  f"- state given: {f('accuracy')} %; end to end (a wrong state is a miss): "
+                  f"{f('end_to_end_accuracy')} %",
+                  f"- within one bin: {f('within_one_bin')} %; mean absolute angular error: "
+                  f"{'-' if mae is None else f'{mae:.1f}'} degrees",
+                  f"- share of errors on the adjacent bin: {f('adjacent_error_share')} %",
+                  f"- errors by bins off (0..4, seed {r0['seed']}): {r0['error_bins']}"]
+    for task, t in doc["tasks"].items():
+        r0 = t["runs"][0]
+        lines += ["", f"## {task}: per object (seed {r0['seed']})", "",
+                  "| object | n | accuracy % |", "|---|---:|---:|"]
+        lines += [f"| {o} | {v['n']} | {pct(v['accuracy'])} |"
+                  for o, v in r0["per_object"].items()]
+        labels = [_label(task, i, n) for i, n in enumerate(r0["labels"])]
+        lines += ["", f"Confusion (rows true, columns predicted; seed {r0['seed']}):", "",
+                  "| true \\ pred | " + " | ".join(labels) + " |", "|---" * (len(labels) + 1) + "|"]
+        lines += [f"| {labels[i]} | " + " | ".join(map(str, row)) + " |"
+                  for i, row in enumerate(r0["confusion"])]
+    if figures:
+        lines += ["", "## Figures", ""] + [f"![{p}]({p})" for p in figures]
+    return "\n".join(lines) + "\n"
+
+
+def _label(task: str, i: int, name: str) -> str:
+    return f"{ARROWS[i]} {COMPASS[i]}" if task == "direction" else name
+
+
+def write_figures(doc: dict[str, Any], out: Path) -> list[str]:
+    """confusion_<task>_counts.png and confusion_<task>_normalised.png; file names."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = []
+    for task, t in doc["tasks"].items():
+        r0 = t["runs"][0]
+        cm = np.asarray(r0["confusion"], dtype=float)
+        labels = [_label(task, i, n) for i, n in enumerate(r0["labels"])]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            norm = cm / cm.sum(1, keepdims=True)
+        for kind, mat in (("counts", cm), ("normalised", norm)):
+            k = len(labels)
+            fig, ax = plt.subplots(figsize=(1.2 + 0.45 * k + 1.5, 1.0 + 0.45 * k + 1.0))
+            show = np.nan_to_num(mat) if kind == "counts" else np.nan_to_num(mat, nan=0.0)
+            im = ax.imshow(show, cmap="Blues", vmin=0, vmax=None if kind == "counts" else 1)
+            ax.set_xticks(range(k), labels, rotation=0 if task == "direction" else 90)
+            ax.set_yticks(range(k), labels)
+            ax.set_xlabel("predicted")
+            ax.set_ylabel("true")
+            if k <= 15:
+                for i in range(k):
+                    for j in range(k):
+                        v = mat[i, j]
+                        if np.isfinite(v) and v:
+                            txt = f"{int(v)}" if kind == "counts" else f"{v:.2f}"
+                            ax.text(j, i, txt, ha="center", va="center", fontsize=7,
+                                    color="white" if show[i, j] > 0.6 * show.max() else "black")
+            ax.set_title(f"{task}: {'counts' if kind == 'counts' else 'row-normalised'} "
+                         f"(seed {r0['seed']})", fontsize=9)
+            fig.colorbar(im, ax=ax, fraction=0.046)
+            fig.tight_layout()
+            name = f"confusion_{task}_{kind}.png"
+            fig.savefig(out / name, dpi=90)
+            plt.close(fig)
+            names.append(name)
+    return names
+
+
+def evaluate(submission: str | Path, dataset: str | Path, split: str, part: str = "test",
+             out: str | Path | None = None, meta: str | Path | None = None,
+             figures: bool = True) -> tuple[dict[str, Any], Submission, Truth]:
+    """Validate, score and (when out is given) write metrics.json, report.md and PNGs."""
+    truth = load_truth(dataset, split, part)
+    sub = load_submission(submission, truth, meta)
+    doc = score(truth, sub)
+    if out is not None:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        names = write_figures(doc, out) if figures else []
+        write_text_atomic(out / "metrics.json", json.dumps(doc, indent=1) + "\n")
+        write_text_atomic(out / "report.md", render_markdown(doc, names))
+    return doc, sub, truth
