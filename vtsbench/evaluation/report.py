@@ -162,11 +162,13 @@ def _label(task: str, i: int, name: str) -> str:
 
 
 def write_figures(doc: dict[str, Any], out: Path) -> list[str]:
-    """confusion_<task>_counts.png and confusion_<task>_normalised.png; file names."""
-    import matplotlib
+    """confusion_<task>.png per task: counts (left) and row-normalised (right), first seed.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    Direction classes are labelled as compass arrows (→ E, ↗ NE, ↑ N, ...). Uses matplotlib's
+    object API (no pyplot) to keep the start-up short.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     names = []
     for task, t in doc["tasks"].items():
@@ -175,31 +177,32 @@ def write_figures(doc: dict[str, Any], out: Path) -> list[str]:
         labels = [_label(task, i, n) for i, n in enumerate(r0["labels"])]
         with np.errstate(invalid="ignore", divide="ignore"):
             norm = cm / cm.sum(1, keepdims=True)
-        for kind, mat in (("counts", cm), ("normalised", norm)):
-            k = len(labels)
-            fig, ax = plt.subplots(figsize=(1.2 + 0.45 * k + 1.5, 1.0 + 0.45 * k + 1.0))
-            show = np.nan_to_num(mat) if kind == "counts" else np.nan_to_num(mat, nan=0.0)
-            im = ax.imshow(show, cmap="Blues", vmin=0, vmax=None if kind == "counts" else 1)
-            ax.set_xticks(range(k), labels, rotation=0 if task == "direction" else 90)
-            ax.set_yticks(range(k), labels)
-            ax.set_xlabel("predicted")
-            ax.set_ylabel("true")
+        k = len(labels)
+        side = 1.6 + 0.42 * k
+        fig = Figure(figsize=(2 * side + 0.6, side + 0.4))
+        FigureCanvasAgg(fig)
+        fig.subplots_adjust(left=0.14, right=0.98, bottom=0.2, top=0.9, wspace=0.45)
+        for col, (kind, mat) in enumerate((("counts", cm), ("row-normalised", norm))):
+            ax = fig.add_subplot(1, 2, col + 1)
+            show = np.nan_to_num(mat)
+            top = max(float(show.max()), 1e-9)
+            ax.imshow(show, cmap="Blues", vmin=0, vmax=top if col == 0 else 1.0)
+            ax.set_xticks(range(k), labels, rotation=0 if task == "direction" else 90,
+                          fontsize=7)
+            ax.set_yticks(range(k), labels, fontsize=7)
+            ax.set_xlabel("predicted", fontsize=8)
+            ax.set_ylabel("true", fontsize=8)
+            ax.set_title(f"{task}: {kind}", fontsize=9)
             if k <= 15:
-                for i in range(k):
-                    for j in range(k):
-                        v = mat[i, j]
-                        if np.isfinite(v) and v:
-                            txt = f"{int(v)}" if kind == "counts" else f"{v:.2f}"
-                            ax.text(j, i, txt, ha="center", va="center", fontsize=7,
-                                    color="white" if show[i, j] > 0.6 * show.max() else "black")
-            ax.set_title(f"{task}: {'counts' if kind == 'counts' else 'row-normalised'} "
-                         f"(seed {r0['seed']})", fontsize=9)
-            fig.colorbar(im, ax=ax, fraction=0.046)
-            fig.tight_layout()
-            name = f"confusion_{task}_{kind}.png"
-            fig.savefig(out / name, dpi=90)
-            plt.close(fig)
-            names.append(name)
+                for i, j in zip(*np.nonzero(show), strict=True):
+                    v = mat[i, j]
+                    ax.text(j, i, f"{int(v)}" if col == 0 else f"{v:.2f}", ha="center",
+                            va="center", fontsize=6,
+                            color="white" if show[i, j] > 0.6 * (top if col == 0 else 1)
+                            else "black")
+        name = f"confusion_{task}.png"
+        fig.savefig(out / name, dpi=80)
+        names.append(name)
     return names
 
 
