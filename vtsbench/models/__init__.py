@@ -1,0 +1,5 @@
+"""Reference models: the dual-head TimeSformer for slip and the ResNet-50 for static recognition.
+
+Import the submodules directly (``vtsbench.models.timesformer``, ``vtsbench.models.resnet``);
+this package imports nothing heavy so that ``import vtsbench`` stays fast.
+"""

@@ -1,0 +1,216 @@
+"""ResNet-50 for static recognition: model, training-time augmentation and Grad-CAM.
+
+The network is torchvision's ``resnet50(weights=None)``; ImageNet weights are optional and
+read from a local file only. Inputs are float tensors ``(B, C, H, W)``: RGB in [0, 1]
+(normalise after ``augment``) with C = 3, or depth with C = 1.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from vtsbench.errors import VtsError
+from vtsbench.models.timesformer import adapt_patch_weight, channels_of
+
+NUM_CLASSES = 15
+
+
+def _load_state_dict(path: Path) -> dict[str, torch.Tensor]:
+    if path.suffix == ".safetensors":
+        from safetensors.torch import load_file
+
+        return load_file(str(path))
+    state = torch.load(path, map_location="cpu", weights_only=True)
+    if isinstance(state, dict) and "state_dict" in state:
+        state = state["state_dict"]
+    return state
+
+
+def static_resnet(
+    num_classes: int = NUM_CLASSES,
+    modality: str = "rgb",
+    pretrained_path: str | Path | None = None,
+) -> nn.Module:
+    """A ResNet-50 classifier for ``rgb`` (3 channels) or ``depth`` (1 channel) input.
+
+    ``pretrained_path`` is a local file with torchvision's ImageNet ResNet-50 state dict
+    (``.pth`` as torchvision saves it, or ``.safetensors``); nothing is downloaded. For depth
+    the first convolution's three RGB filters are averaged into one; the 1000-class ImageNet
+    classifier is replaced by a fresh ``num_classes`` one.
+    """
+    from torchvision.models import resnet50
+
+    channels = channels_of(modality)
+    if channels not in (1, 3):
+        raise VtsError(f"static ResNet supports 'rgb' and 'depth', not {modality!r}")
+    model = resnet50(weights=None)
+    if pretrained_path is not None:
+        path = Path(pretrained_path)
+        if not path.is_file():
+            raise VtsError(
+                "ImageNet ResNet-50 weights not found; save torchvision's "
+                "ResNet50_Weights.IMAGENET1K_V2 state dict there on a machine with network, "
+                "or train without pretrained_path",
+                path,
+            )
+        model.load_state_dict(_load_state_dict(path))
+    if channels == 1:
+        old = model.conv1
+        model.conv1 = nn.Conv2d(
+            1, old.out_channels, old.kernel_size, old.stride, old.padding, bias=False
+        )
+        with torch.no_grad():
+            model.conv1.weight.copy_(adapt_patch_weight(old.weight, 1))
+    model.fc = nn.Linear(model.fc.in_features, num_classes)
+    return model
+
+
+def _uniform(generator: torch.Generator, lo: float, hi: float) -> float:
+    return lo + (hi - lo) * float(torch.rand((), generator=generator))
+
+
+def augment(
+    batch: torch.Tensor,
+    modality: str,
+    generator: torch.Generator,
+    *,
+    jitter: float = 0.3,
+    max_rotation: float = 15.0,
+    crop_scale: tuple[float, float] = (0.8, 1.0),
+) -> torch.Tensor:
+    """Training-time augmentation of a batch ``(B, C, H, W)``, deterministic given ``generator``.
+
+    Per sample: colour jitter (brightness, contrast, saturation by factors in
+    [1 - jitter, 1 + jitter]) on the RGB channels only (``rgb``, and the first three of
+    ``rgbd``); then the same geometric transform on every channel: horizontal and vertical
+    flips (p = 0.5 each), a rotation in [-max_rotation, max_rotation] degrees (zero fill) and a
+    random resized crop back to (H, W). Depth values are only moved, never rescaled (bilinear
+    resampling aside). RGB is expected in [0, 1].
+    """
+    from torchvision.transforms.v2 import functional as TF
+
+    channels = channels_of(modality)
+    if batch.ndim != 4 or batch.shape[1] != channels:
+        raise ValueError(f"expected (B, {channels}, H, W) for {modality}, got {tuple(batch.shape)}")
+    h, w = batch.shape[-2:]
+    out = []
+    for img in batch:
+        if modality in ("rgb", "rgbd"):
+            rgb = img[:3]
+            rgb = TF.adjust_brightness(rgb, _uniform(generator, 1 - jitter, 1 + jitter))
+            rgb = TF.adjust_contrast(rgb, _uniform(generator, 1 - jitter, 1 + jitter))
+            rgb = TF.adjust_saturation(rgb, _uniform(generator, 1 - jitter, 1 + jitter))
+            img = torch.cat([rgb, img[3:]], dim=0)
+        if float(torch.rand((), generator=generator)) < 0.5:
+            img = TF.horizontal_flip(img)
+        if float(torch.rand((), generator=generator)) < 0.5:
+            img = TF.vertical_flip(img)
+        angle = _uniform(generator, -max_rotation, max_rotation)
+        img = TF.rotate(img, angle, interpolation=TF.InterpolationMode.BILINEAR, fill=0.0)
+        area = _uniform(generator, *crop_scale) * h * w
+        ratio = math.exp(_uniform(generator, math.log(3 / 4), math.log(4 / 3)))
+        ch = min(h, max(1, round(math.sqrt(area / ratio))))
+        cw = min(w, max(1, round(math.sqrt(area * ratio))))
+        top = int(torch.randint(0, h - ch + 1, (), generator=generator))
+        left = int(torch.randint(0, w - cw + 1, (), generator=generator))
+        img = TF.resized_crop(
+            img,
+            top,
+            left,
+            ch,
+            cw,
+            [h, w],
+            interpolation=TF.InterpolationMode.BILINEAR,
+            antialias=True,
+        )
+        out.append(img)
+    return torch.stack(out)
+
+
+def grad_cam(
+    model: nn.Module,
+    x: torch.Tensor,
+    target: int | Sequence[int] | torch.Tensor | None = None,
+    layer: nn.Module | None = None,
+) -> torch.Tensor:
+    """Grad-CAM heat maps ``(B, H, W)`` in [0, 1] at the input's size.
+
+    ``layer`` defaults to the last convolutional block (``model.layer4``). ``target`` is the
+    class explained: ``None`` for each sample's predicted class, an int for all samples, or
+    one per sample. The map is ReLU(sum_k alpha_k A_k) with alpha_k the spatial mean of
+    d score / d A_k, upsampled bilinearly and scaled by its per-sample maximum (all zeros
+    when nothing is positive). Parameter gradients are left untouched.
+    """
+    layer = model.layer4 if layer is None else layer
+    store: dict[str, torch.Tensor] = {}
+
+    def hook(_module, _inputs, output):
+        store["act"] = output
+
+    handle = layer.register_forward_hook(hook)
+    try:
+        with torch.enable_grad():
+            x = x.detach().requires_grad_(True)
+            logits = model(x)
+            if target is None:
+                tgt = logits.argmax(dim=1)
+            else:
+                tgt = torch.as_tensor(target, device=logits.device).long().expand(logits.shape[0])
+            score = logits.gather(1, tgt[:, None]).sum()
+            act = store["act"]
+            (grad,) = torch.autograd.grad(score, act)
+    finally:
+        handle.remove()
+    weights = grad.mean(dim=(2, 3), keepdim=True)
+    cam = F.relu((weights * act).sum(dim=1, keepdim=True)).detach()
+    cam = F.interpolate(cam, size=x.shape[-2:], mode="bilinear", align_corners=False)[:, 0]
+    peak = cam.flatten(1).amax(dim=1).clamp_min(1e-12)[:, None, None]
+    cam = (cam / peak).clamp(0.0, 1.0)
+    return torch.nan_to_num(cam, nan=0.0)
+
+
+def _display_image(img: np.ndarray) -> np.ndarray:
+    """(C, H, W) -> (H, W, 3) in [0, 1]: RGB clipped, one channel (depth) min-max scaled."""
+    if img.shape[0] >= 3:
+        return np.clip(np.transpose(img[:3], (1, 2, 0)), 0.0, 1.0)
+    d = img[0]
+    span = float(d.max() - d.min())
+    d = (d - d.min()) / span if span > 0 else np.zeros_like(d)
+    return np.repeat(d[..., None], 3, axis=2)
+
+
+def write_gradcam_overlays(
+    images: torch.Tensor,
+    cams: torch.Tensor,
+    paths: Sequence[str | Path],
+    alpha: float = 0.45,
+    colormap: str = "jet",
+) -> list[Path]:
+    """Write one PNG per sample: the image blended with its Grad-CAM map in ``colormap``.
+
+    ``images`` is ``(B, C, H, W)`` (RGB in [0, 1], or one depth channel, scaled per image),
+    ``cams`` is ``(B, H, W)`` in [0, 1] (as ``grad_cam`` returns). Returns the paths written.
+    """
+    import matplotlib
+    from matplotlib.image import imsave
+
+    if len(paths) != len(images) or len(cams) != len(images):
+        raise ValueError("images, cams and paths must have the same length")
+    cmap = matplotlib.colormaps[colormap]
+    written = []
+    for img, cam, path in zip(images, cams, paths, strict=True):
+        base = _display_image(img.detach().float().cpu().numpy())
+        heat = cmap(np.clip(cam.detach().float().cpu().numpy(), 0.0, 1.0))[..., :3]
+        overlay = (1 - alpha) * base + alpha * heat
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        imsave(path, np.clip(overlay, 0.0, 1.0), format="png")
+        written.append(path)
+    return written
