@@ -480,6 +480,78 @@ def leaderboard_rescore(
     typer.echo(f"re-scored {len(changed)} entr{'y' if len(changed) == 1 else 'ies'}")
 
 
+@app.command()
+def train(
+    recipe: Annotated[str, typer.Argument(help="Recipe: a registered name or a .py file.")],
+    dataset: Annotated[Path, typer.Option(help="Dataset folder.")],
+    split: Annotated[str, typer.Option(help="Split scheme; trains on its train part.")],
+    out: Annotated[Path, typer.Option(help="Output folder (checkpoints).")],
+    config: Annotated[Path | None, typer.Option(
+        help="JSON or TOML file overriding keys of the recipe's default config.")] = None,
+    seed: Annotated[int, typer.Option(min=0, help="Random seed.")] = 0,
+    device: Annotated[str, typer.Option(help="auto (CUDA when present), cpu, cuda, cuda:1...")
+    ] = "auto",
+    resume: Annotated[bool, typer.Option(
+        "--resume/--no-resume", help="Continue from the last checkpoint in --out.")] = True,
+    quiet: Annotated[bool, typer.Option(help="No progress bar.")] = False,
+) -> None:
+    """Train a recipe on a split's train part; prints the checkpoint path.
+
+    Example: [bold]vtsbench train recipes/flow.py --dataset data/ds --split unseen_objects --out
+    runs/flow[/]
+    """
+    import json
+
+    from .recipes import load_config, load_recipe
+
+    rec = _run(load_recipe, recipe)
+    cfg = _run(load_config, rec, config)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "config.json").write_text(json.dumps(cfg, indent=1, sort_keys=True) + "\n")
+    ckpt = _run(rec.train, dataset, split, out, cfg, seed=seed, device=device, resume=resume,
+                progress=not quiet)
+    typer.echo(f"trained {rec.name} on {split}/train: checkpoint {ckpt}")
+
+
+@app.command()
+def predict(
+    recipe: Annotated[str, typer.Argument(help="Recipe: a registered name or a .py file.")],
+    checkpoint: Annotated[Path, typer.Argument(help="Checkpoint written by vtsbench train.")],
+    dataset: Annotated[Path, typer.Option(help="Dataset folder.")],
+    split: Annotated[str, typer.Option(help="Split scheme.")],
+    out: Annotated[Path, typer.Option(help="Submission CSV to write (+ OUT.meta.json).")],
+    part: Annotated[str, typer.Option(help="Part of the split to predict.")] = "test",
+    device: Annotated[str, typer.Option(help="auto, cpu, cuda...")] = "auto",
+    method: Annotated[str | None, typer.Option(
+        help="Method name in the metadata (default: the recipe's name).")] = None,
+    seed: Annotated[int, typer.Option(min=0, help="Training seed, for the metadata.")] = 0,
+) -> None:
+    """Predict a split part with a trained recipe; writes a submission vtsbench eval accepts.
+
+    Example: [bold]vtsbench predict recipes/flow.py runs/flow/checkpoint.safetensors --dataset
+    data/ds --split unseen_objects --out flow.csv[/]
+    """
+    import time
+
+    from .recipes import load_recipe, write_submission
+
+    rec = _run(load_recipe, recipe)
+    if not checkpoint.exists():
+        _fail(FileNotFoundError(f"checkpoint not found: {checkpoint}"))
+    t0 = time.perf_counter()
+    rows = _run(rec.predict, checkpoint, dataset, split, part, device=device)
+    wall = time.perf_counter() - t0
+    n = len({r["sample_id"] for r in rows})
+    extra = {"split": split, "part": part, "checkpoint": str(checkpoint),
+             "predict_seconds_per_sample": round(wall / max(n, 1), 6)}
+    lat = getattr(rec, "latency_s", None)
+    if lat:
+        extra["latency_ms_per_sample_median"] = round(1000 * sorted(lat)[len(lat) // 2], 3)
+    sub, meta = _run(write_submission, rows, out, method=method or rec.name,
+                     dataset_path=dataset, recipe=str(recipe), seeds=[seed], extra=extra)
+    typer.echo(f"wrote {len(rows)} rows for {n} samples to {sub} and {meta}")
+
+
 # -- collect: registered below --
 
 

@@ -1,0 +1,192 @@
+"""Optical-flow baseline (no deep learning): OpenCV DIS flow between consecutive RGB frames.
+
+State (static / press / slip) comes from a shallow scikit-learn decision tree fitted on the
+training part over flow features: mean magnitude, net translation (length of the mean flow
+vector), coherence (net translation over mean magnitude), divergence (press spreads the gel
+outwards) and their time profile (first half against second half of the sequence). Direction
+comes from the mean flow vector: angle = atan2(-mean dy (rows point down), mean dx), binned with
+`vtsbench.labels.angle_to_class`. The checkpoint holds the fitted tree as arrays in safetensors
+(no pickle) and the config as JSON metadata.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from vtsbench.errors import VtsError
+from vtsbench.labels import N_DIRECTIONS, STATES, angle_to_class
+from vtsbench.recipes import Recipe, progress_iter
+
+FEATURES = ("mag_mean", "mag_p90", "net", "coherence", "div_mean", "div_abs", "mag_late_ratio",
+            "net_late_ratio")
+CHECKPOINT = "checkpoint.safetensors"
+
+
+def _gray(frames: np.ndarray, scale: float) -> list[np.ndarray]:
+    import cv2
+
+    out = []
+    for f in frames:
+        g = cv2.cvtColor(np.ascontiguousarray(f), cv2.COLOR_RGB2GRAY)
+        if scale != 1.0:
+            g = cv2.resize(g, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        out.append(g)
+    return out
+
+
+def sequence_flow(frames: np.ndarray, preset: str = "fast", scale: float = 1.0) -> np.ndarray:
+    """DIS flow between consecutive frames of (T, H, W, 3) uint8 RGB: (T-1, h, w, 2) in pixels
+    of the input (x right, y down the rows)."""
+    import cv2
+
+    presets = {"ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,
+               "fast": cv2.DISOPTICAL_FLOW_PRESET_FAST,
+               "medium": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM}
+    dis = cv2.DISOpticalFlow_create(presets[preset])
+    g = _gray(frames, scale)
+    flows = [dis.calc(g[k], g[k + 1], None) for k in range(len(g) - 1)]
+    return np.stack(flows) / scale
+
+
+def flow_features(flow: np.ndarray) -> tuple[np.ndarray, float]:
+    """The feature vector (FEATURES) and the mean flow angle (degrees, image y up)."""
+    fx, fy = flow[..., 0], flow[..., 1]
+    mag = np.hypot(fx, fy)
+    div = np.gradient(fx, axis=2) + np.gradient(fy, axis=1)
+    mag_t = mag.mean(axis=(1, 2))
+    net_t = np.hypot(fx.mean(axis=(1, 2)), fy.mean(axis=(1, 2)))
+    mdx, mdy = float(fx.mean()), float(fy.mean())
+    net = math.hypot(mdx, mdy)
+    half = max(1, len(mag_t) // 2)
+    eps = 1e-6
+    feats = np.array([
+        mag.mean(), np.percentile(mag, 90), net, net / (mag.mean() + eps), div.mean(),
+        np.abs(div).mean(),
+        mag_t[half:].mean() / (mag_t[:half].mean() + eps),
+        net_t[half:].mean() / (net_t[:half].mean() + eps),
+    ], dtype=np.float64)
+    angle = math.degrees(math.atan2(-mdy, mdx)) % 360.0
+    return feats, angle
+
+
+class _Tree:
+    """A fitted decision tree as plain arrays (what the checkpoint stores), and its prediction."""
+
+    def __init__(self, left: np.ndarray, right: np.ndarray, feature: np.ndarray,
+                 threshold: np.ndarray, label: np.ndarray) -> None:
+        self.left, self.right, self.feature = left, right, feature
+        self.threshold, self.label = threshold, label
+
+    @classmethod
+    def fit(cls, x: np.ndarray, y: np.ndarray, max_depth: int, seed: int) -> _Tree:
+        from sklearn.tree import DecisionTreeClassifier
+
+        clf = DecisionTreeClassifier(max_depth=max_depth, class_weight="balanced",
+                                     random_state=seed).fit(x, y)
+        t = clf.tree_
+        label = clf.classes_[np.argmax(t.value[:, 0, :], axis=1)].astype(np.int64)
+        return cls(t.children_left.astype(np.int64), t.children_right.astype(np.int64),
+                   t.feature.astype(np.int64), t.threshold.astype(np.float64), label)
+
+    def predict_one(self, v: np.ndarray) -> int:
+        node = 0
+        while self.left[node] != -1:
+            node = self.left[node] if v[self.feature[node]] <= self.threshold[node] \
+                else self.right[node]
+        return int(self.label[node])
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {"tree.left": self.left, "tree.right": self.right, "tree.feature": self.feature,
+                "tree.threshold": self.threshold, "tree.label": self.label}
+
+
+class FlowRecipe(Recipe):
+    name = "flow"
+    tasks = ("state", "direction")
+
+    def __init__(self) -> None:
+        #: seconds per sequence spent in flow + features + classification by the last predict
+        self.latency_s: list[float] = []
+
+    def default_config(self) -> dict[str, Any]:
+        return {"preset": "fast", "scale": 1.0, "max_depth": 3, "fit_parts": ["train"]}
+
+    def _features(self, view: Any, config: dict[str, Any], progress: bool, label: str):
+        feats, angles, ids, times = [], [], [], []
+        for s in progress_iter(view, len(view), label, progress):
+            t0 = time.perf_counter()
+            f, a = flow_features(sequence_flow(s["rgb"], config["preset"], config["scale"]))
+            times.append(time.perf_counter() - t0)
+            feats.append(f)
+            angles.append(a)
+            ids.append(s["sample_id"])
+        x = np.stack(feats) if feats else np.zeros((0, len(FEATURES)))
+        return ids, x, angles, times
+
+    def train(self, dataset_path: str | Path, split: str, out_dir: str | Path,
+              config: dict[str, Any], *, seed: int = 0, device: str = "auto",
+              resume: bool = True, progress: bool = True) -> Path:
+        from safetensors.numpy import save_file
+
+        import vtsbench
+
+        ds = vtsbench.load(dataset_path)
+        xs, ys = [], []
+        for part in config["fit_parts"]:
+            view = ds.split(split, part)
+            states = view.index["state_idx"].to_pylist()
+            _, x, _, _ = self._features(view, config, progress, f"flow features ({part})")
+            keep = [i for i, s in enumerate(states) if s is not None]
+            xs.append(x[keep])
+            ys.append(np.array([states[i] for i in keep], dtype=np.int64))
+        x, y = np.concatenate(xs), np.concatenate(ys)
+        if len(y) == 0:
+            raise VtsError(f"no labelled samples in {split}/{config['fit_parts']} to fit on")
+        tree = _Tree.fit(x, y, int(config["max_depth"]), seed)
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        path = out / CHECKPOINT
+        meta = {"recipe": self.name, "config": json.dumps(config), "features": json.dumps(FEATURES),
+                "split": split, "seed": str(seed), "train_samples": str(len(y))}
+        tmp = path.with_name(path.name + ".tmp")
+        save_file(tree.arrays(), str(tmp), metadata=meta)
+        tmp.replace(path)
+        return path
+
+    def predict(self, checkpoint: str | Path, dataset_path: str | Path, split: str,
+                part: str = "test", *, device: str = "auto",
+                progress: bool = False) -> list[dict[str, Any]]:
+        from safetensors import safe_open
+
+        import vtsbench
+
+        with safe_open(str(checkpoint), framework="numpy") as fh:
+            meta = fh.metadata() or {}
+            if meta.get("recipe") != self.name:
+                raise VtsError("not a flow recipe checkpoint", checkpoint)
+            arrays = {k: fh.get_tensor(k) for k in fh.keys()}  # noqa: SIM118 - not a dict
+        config = json.loads(meta["config"])
+        tree = _Tree(arrays["tree.left"], arrays["tree.right"], arrays["tree.feature"],
+                     arrays["tree.threshold"], arrays["tree.label"])
+        view = vtsbench.load(dataset_path).split(split, part)
+        rows: list[dict[str, Any]] = []
+        self.latency_s = []
+        for s in progress_iter(view, len(view), f"flow ({part})", progress):
+            t0 = time.perf_counter()
+            f, angle = flow_features(sequence_flow(s["rgb"], config["preset"], config["scale"]))
+            state = tree.predict_one(f)
+            direction = angle_to_class(angle)
+            self.latency_s.append(time.perf_counter() - t0)
+            rows.append({"sample_id": s["sample_id"], "task": "state", "pred": STATES[state]})
+            rows.append({"sample_id": s["sample_id"], "task": "direction", "pred": direction})
+        assert all(0 <= r["pred"] < N_DIRECTIONS for r in rows if r["task"] == "direction")
+        return rows
+
+
+RECIPE = FlowRecipe()

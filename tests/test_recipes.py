@@ -1,0 +1,145 @@
+"""Recipe loading (file path, entry point, built-in name), configs and submission writing."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from vtsbench.errors import VtsError
+from vtsbench.recipes import Recipe, load_config, load_recipe, registered
+
+pytest_plugins = ["loader_conftest"]
+
+ROOT = Path(__file__).resolve().parents[1]
+
+TOY = '''
+from vtsbench.recipes import Recipe
+
+
+class Toy(Recipe):
+    name = "toy"
+    tasks = ("state", "direction")
+
+    def default_config(self):
+        return {"state": "slip", "direction": 2}
+
+    def train(self, dataset_path, split, out_dir, config, *, seed=0, device="auto",
+              resume=True, progress=True):
+        import json, pathlib
+        path = pathlib.Path(out_dir) / "toy.json"
+        path.write_text(json.dumps(config))
+        return path
+
+    def predict(self, checkpoint, dataset_path, split, part="test", *, device="auto"):
+        import json, vtsbench
+        cfg = json.loads(open(checkpoint).read())
+        rows = []
+        for sid in vtsbench.load(dataset_path).split(split, part).ids:
+            rows.append({"sample_id": sid, "task": "state", "pred": cfg["state"]})
+            rows.append({"sample_id": sid, "task": "direction", "pred": cfg["direction"]})
+        return rows
+
+
+RECIPE = Toy
+'''
+
+
+@pytest.fixture
+def toy_file(tmp_path: Path) -> Path:
+    path = tmp_path / "toy_recipe.py"
+    path.write_text(TOY)
+    return path
+
+
+def test_load_from_path(toy_file: Path) -> None:
+    rec = load_recipe(toy_file)
+    assert isinstance(rec, Recipe) and rec.name == "toy"
+    assert load_recipe(str(toy_file)).default_config() == {"state": "slip", "direction": 2}
+
+
+def test_load_errors(tmp_path: Path) -> None:
+    with pytest.raises(VtsError, match="not found"):
+        load_recipe(tmp_path / "nope.py")
+    bad = tmp_path / "bad.py"
+    bad.write_text("X = 1\n")
+    with pytest.raises(VtsError, match="no RECIPE"):
+        load_recipe(bad)
+    half = tmp_path / "half.py"
+    half.write_text("class R:\n    name = 'r'\nRECIPE = R()\n")
+    with pytest.raises(VtsError, match="missing tasks"):
+        load_recipe(half)
+    with pytest.raises(VtsError, match="unknown recipe 'no-such-recipe'"):
+        load_recipe("no-such-recipe")
+
+
+def test_entry_point_registration(tmp_path: Path, toy_file: Path,
+                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """A third-party package registers a recipe under the group vtsbench.recipes."""
+    pkg = tmp_path / "site"
+    (pkg / "toypkg").mkdir(parents=True)
+    (pkg / "toypkg" / "__init__.py").write_text(TOY)
+    dist = pkg / "toypkg-1.0.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: toypkg\nVersion: 1.0\n")
+    (dist / "entry_points.txt").write_text("[vtsbench.recipes]\ntoy = toypkg:RECIPE\n")
+    monkeypatch.syspath_prepend(str(pkg))
+    assert "toy" in registered()
+    rec = load_recipe("toy")
+    assert rec.name == "toy" and rec.tasks == ("state", "direction")
+
+
+def test_builtin_name_and_pyproject_entry() -> None:
+    assert load_recipe("flow").name == "flow"
+    text = (ROOT / "pyproject.toml").read_text()
+    assert '[project.entry-points."vtsbench.recipes"]' in text
+    assert 'flow = "recipes.flow:RECIPE"' in text
+    assert '"recipes*"' in text
+
+
+def test_config_override(toy_file: Path, tmp_path: Path) -> None:
+    rec = load_recipe(toy_file)
+    assert load_config(rec, None) == {"state": "slip", "direction": 2}
+    js = tmp_path / "c.json"
+    js.write_text(json.dumps({"direction": 5}))
+    assert load_config(rec, js) == {"state": "slip", "direction": 5}
+    toml = tmp_path / "c.toml"
+    toml.write_text('state = "press"\n')
+    assert load_config(rec, toml)["state"] == "press"
+    js.write_text(json.dumps({"lr": 1}))
+    with pytest.raises(VtsError, match="unknown config keys"):
+        load_config(rec, js)
+    with pytest.raises(VtsError, match="not found"):
+        load_config(rec, tmp_path / "missing.json")
+
+
+def test_cli_train_predict_eval_with_a_file_recipe(vts_dataset: Path, toy_file: Path,
+                                                   tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from vtsbench.cli import app
+
+    runner = CliRunner()
+    cfg = tmp_path / "cfg.json"
+    cfg.write_text(json.dumps({"state": "static"}))
+    res = runner.invoke(app, ["train", str(toy_file), "--dataset", str(vts_dataset), "--split",
+                              "unseen_objects", "--out", str(tmp_path / "run"), "--config",
+                              str(cfg), "--quiet"])
+    assert res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["state"] == "static"
+    sub = tmp_path / "toy.csv"
+    res = runner.invoke(app, ["predict", str(toy_file), str(tmp_path / "run" / "toy.json"),
+                              "--dataset", str(vts_dataset), "--split", "unseen_objects",
+                              "--out", str(sub), "--method", "toy baseline"])
+    assert res.exit_code == 0, res.output
+    meta = json.loads((tmp_path / "toy.meta.json").read_text())
+    assert meta["method"] == "toy baseline" and meta["dataset_version"] == "1.0.0"
+    res = runner.invoke(app, ["eval", str(sub), "--dataset", str(vts_dataset), "--split",
+                              "unseen_objects"])
+    assert res.exit_code == 0, res.output
+    assert "toy baseline" in res.output
+    res = runner.invoke(app, ["predict", str(toy_file), str(tmp_path / "nope.json"),
+                              "--dataset", str(vts_dataset), "--split", "unseen_objects",
+                              "--out", str(sub)])
+    assert res.exit_code == 2

@@ -1,0 +1,205 @@
+"""Recipes: a baseline that trains on a dataset split and writes a submission `vtsbench eval`
+accepts.
+
+A recipe is an object with `name`, `tasks`, `default_config()`, `train(...)` and
+`predict(...)` (the `Recipe` base class below documents the contract). It is found by
+`load_recipe(name_or_path)`: a path to a Python file that defines `RECIPE`, or a name registered
+under the entry-point group `vtsbench.recipes` (the built-in ones live in the top-level `recipes`
+package). A recipe uses vtsbench's public API only: `vtsbench.load`, views, `to_torch`,
+`vtsbench.training` and `vtsbench.labels`.
+"""
+
+from __future__ import annotations
+
+import csv
+import importlib
+import importlib.util
+import json
+import sys
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from .errors import VtsError
+
+ENTRY_POINT_GROUP = "vtsbench.recipes"
+#: The columns of a submission row, in the order they are written.
+ROW_COLUMNS = ("sample_id", "task", "pred")
+
+
+class Recipe:
+    """Base class of a recipe (subclass it, or write any object with the same members).
+
+    - `name`: short identifier, written into the submission's metadata.
+    - `tasks`: the submission tasks it predicts, e.g. ("state", "direction") or ("object",).
+    - `default_config()`: a JSON-able dict; a `--config` file overrides some of its keys.
+    - `train(dataset_path, split, out_dir, config, *, seed, device, resume, progress)`: fit on
+      the split's `train` part (and `val` if it wants), write a checkpoint under out_dir and
+      return its path. With `resume`, continue from the last checkpoint found in out_dir.
+    - `predict(checkpoint, dataset_path, split, part, *, device)`: a list of submission rows
+      (dicts with `sample_id`, `task`, `pred` and optional `score_k`) for every sample of part.
+    """
+
+    name: str = "recipe"
+    tasks: tuple[str, ...] = ()
+
+    def default_config(self) -> dict[str, Any]:
+        return {}
+
+    def train(self, dataset_path: str | Path, split: str, out_dir: str | Path,
+              config: dict[str, Any], *, seed: int = 0, device: str = "auto",
+              resume: bool = True, progress: bool = True) -> Path:
+        raise NotImplementedError
+
+    def predict(self, checkpoint: str | Path, dataset_path: str | Path, split: str,
+                part: str = "test", *, device: str = "auto") -> list[dict[str, Any]]:
+        raise NotImplementedError
+
+
+_REQUIRED = ("name", "tasks", "default_config", "train", "predict")
+
+
+def _check(obj: Any, where: str) -> Any:
+    if isinstance(obj, type):
+        obj = obj()
+    missing = [m for m in _REQUIRED if not hasattr(obj, m)]
+    if missing:
+        raise VtsError(f"not a recipe: missing {', '.join(missing)}", where)
+    return obj
+
+
+def _from_file(path: Path) -> Any:
+    if not path.is_file():
+        raise VtsError("recipe file not found", path)
+    mod_name = f"vtsbench_recipe_{path.stem}_{abs(hash(str(path.resolve()))) & 0xFFFFFFFF:x}"
+    spec = importlib.util.spec_from_file_location(mod_name, path)
+    if spec is None or spec.loader is None:
+        raise VtsError("cannot import the recipe file", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[mod_name] = module
+    try:
+        spec.loader.exec_module(module)
+    except Exception:
+        sys.modules.pop(mod_name, None)
+        raise
+    if not hasattr(module, "RECIPE"):
+        raise VtsError("the recipe file defines no RECIPE", path)
+    return _check(module.RECIPE, str(path))
+
+
+def registered() -> dict[str, Any]:
+    """The entry points of the group `vtsbench.recipes`, by name."""
+    from importlib.metadata import entry_points
+
+    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def _builtin_file(name: str) -> Path | None:
+    """recipes/NAME.py of a source checkout (when the installed metadata predates it)."""
+    path = Path(__file__).resolve().parents[1] / "recipes" / f"{name}.py"
+    return path if path.is_file() else None
+
+
+def load_recipe(name_or_path: str | Path) -> Any:
+    """A recipe from a .py file defining RECIPE, or by its registered name."""
+    text = str(name_or_path)
+    if text.endswith(".py") or "/" in text or Path(text).is_file():
+        return _from_file(Path(text))
+    eps = registered()
+    if text in eps:
+        return _check(eps[text].load(), f"entry point {text}")
+    try:
+        module = importlib.import_module(f"recipes.{text}")
+    except ModuleNotFoundError:
+        module = None
+    if module is not None and hasattr(module, "RECIPE"):
+        return _check(module.RECIPE, f"recipes.{text}")
+    path = _builtin_file(text)
+    if path is not None:
+        return _from_file(path)
+    known = ", ".join(sorted(eps)) or "none"
+    raise VtsError(f"unknown recipe {text!r} (registered: {known}; or give a path to a .py file)")
+
+
+def load_config(recipe: Any, path: str | Path | None) -> dict[str, Any]:
+    """The recipe's default config updated by a JSON (or TOML) file; unknown keys are an error."""
+    config = dict(recipe.default_config())
+    if path is None:
+        return config
+    path = Path(path)
+    try:
+        if path.suffix == ".toml":
+            import tomllib
+
+            given = tomllib.loads(path.read_text())
+        else:
+            given = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise VtsError("config file not found", path) from None
+    except ValueError as e:
+        raise VtsError(f"config is not valid ({e})", path) from None
+    if not isinstance(given, dict):
+        raise VtsError("config must be a mapping of option names to values", path)
+    unknown = sorted(set(given) - set(config))
+    if unknown:
+        raise VtsError(f"unknown config keys {unknown} (known: {sorted(config)})", path)
+    config.update(given)
+    return config
+
+
+def write_submission(rows: Iterable[dict[str, Any]], out: str | Path, *, method: str,
+                     dataset_path: str | Path, recipe: str | None = None,
+                     seeds: list[int] | None = None, extra: dict[str, Any] | None = None
+                     ) -> tuple[Path, Path]:
+    """Write rows as a submission CSV and its metadata (OUT.meta.json) beside it."""
+    from .dataset.loader import load
+    from .evaluation.submission import default_meta_path
+
+    rows = list(rows)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    extra_cols = sorted({k for r in rows for k in r if k not in ROW_COLUMNS},
+                        key=lambda k: (not k.startswith("score_"), len(k), k))
+    cols = [*ROW_COLUMNS, *extra_cols]
+    with open(out, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=cols)
+        w.writeheader()
+        for r in rows:
+            w.writerow({c: r.get(c, "") for c in cols})
+    info = load(dataset_path).info
+
+    meta: dict[str, Any] = {"method": method, "recipe": recipe,
+                            "dataset_version": info.dataset_version,
+                            "dataset_sha256": info.dataset_sha256,
+                            "vtsbench_version": _version()}
+    if seeds is not None:
+        meta["seeds"] = seeds
+    meta.update(extra or {})
+    meta_path = default_meta_path(out)
+    meta_path.write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
+    return out, meta_path
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("vtsbench")
+    except PackageNotFoundError:  # pragma: no cover - running from a bare checkout
+        return "0+unknown"
+
+
+def progress_iter(items: Iterable[Any], total: int, label: str, enabled: bool = True
+                  ) -> Iterable[Any]:
+    """Iterate with a rich progress bar (on stderr) when enabled."""
+    if not enabled:
+        yield from items
+        return
+    from rich.console import Console
+    from rich.progress import Progress
+
+    with Progress(console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task(label, total=total)
+        for item in items:
+            yield item
+            bar.advance(task)
