@@ -1,0 +1,173 @@
+"""Dual-head TimeSformer for slip: state (static / press / slip) and direction (8 bins).
+
+The model is `vtsbench.models.timesformer.DualHeadTimesformer` (transformers'
+`TimesformerModel`, divided space-time attention) with a state head and a direction head on the
+global token, trained with the masked joint loss L = L_state + lambda * 1[state = slip] * L_dir
+through `vtsbench.training.train_loop` (seeded batches, safetensors checkpoints, exact resume,
+mixed precision on CUDA, DDP under torchrun). Configs: `small` (random init, trains on a CPU in
+minutes) and `paper` (base, 224x224, 8 frames, from `facebook/timesformer-base-finetuned-ssv2`
+on disk). Inputs: rgb, depth or rgbd. The checkpoint holds the weights and, in its metadata, the
+recipe's config, so `predict` rebuilds the same model.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+from vtsbench.errors import VtsError
+from vtsbench.labels import STATES
+from vtsbench.recipes import Recipe, progress_iter
+
+MODALITIES = ("rgb", "depth", "rgbd")
+
+
+def _normalize(x: Any, modality: str, depth_scale_mm: float) -> Any:
+    """rgb in [0, 1] -> [-1, 1]; depth (mm) divided by depth_scale_mm. x: (..., C, H, W)."""
+    if modality == "rgb":
+        return (x - 0.5) / 0.5
+    if modality == "depth":
+        return x / depth_scale_mm
+    out = x.clone()
+    out[..., :3, :, :] = (x[..., :3, :, :] - 0.5) / 0.5
+    out[..., 3:, :, :] = x[..., 3:, :, :] / depth_scale_mm
+    return out
+
+
+class TimesformerRecipe(Recipe):
+    name = "timesformer"
+    tasks = ("state", "direction")
+
+    def __init__(self) -> None:
+        #: seconds of forward pass per sequence measured by the last predict
+        self.latency_s: list[float] = []
+
+    def default_config(self) -> dict[str, Any]:
+        return {
+            "config": "small",          # small | paper
+            "modality": "rgb",          # rgb | depth | rgbd
+            "image_size": None,         # None: the config's (small 112, paper 224)
+            "num_frames": None,         # None: the config's (8)
+            "pretrained_path": None,    # folder with the paper's weights (paper: HF cache too)
+            "lambda_dir": 1.0,          # weight of the direction term of the masked loss
+            "steps": 300,
+            "batch_size": 8,
+            "lr": 3e-4,
+            "weight_decay": 0.05,
+            "warmup_steps": 20,
+            "schedule": "cosine",
+            "grad_clip": 1.0,
+            "dropout": 0.0,
+            "depth_scale_mm": 1.0,
+            "checkpoint_every": 50,
+            "amp": True,
+        }
+
+    # -- model and data -------------------------------------------------------------------
+
+    @staticmethod
+    def _check(config: dict[str, Any]) -> None:
+        if config["config"] not in ("small", "paper"):
+            raise VtsError(f"config must be 'small' or 'paper', not {config['config']!r}")
+        if config["modality"] not in MODALITIES:
+            raise VtsError(f"modality must be one of {MODALITIES}, not {config['modality']!r}")
+
+    @staticmethod
+    def _model(config: dict[str, Any], *, pretrained: bool | None) -> Any:
+        from vtsbench.models.timesformer import DualHeadTimesformer
+
+        return DualHeadTimesformer.from_config(
+            config["config"], config["modality"], config["pretrained_path"],
+            pretrained=pretrained, image_size=config["image_size"],
+            num_frames=config["num_frames"], dropout=float(config["dropout"]))
+
+    @staticmethod
+    def _view_torch(view: Any, model: Any, config: dict[str, Any]) -> Any:
+        size = int(model.config.image_size)
+        return view.to_torch(config["modality"], size=(size, size),
+                             frames=int(model.config.num_frames))
+
+    # -- train / predict --------------------------------------------------------------------
+
+    def train(self, dataset_path: str | Path, split: str, out_dir: str | Path,
+              config: dict[str, Any], *, seed: int = 0, device: str = "auto",
+              resume: bool = True, progress: bool = True) -> Path:
+        import torch
+        from torch.utils.data import Subset
+
+        import vtsbench
+        from vtsbench.models.timesformer import masked_joint_loss
+        from vtsbench.training import TrainConfig, seed_everything, train_loop
+
+        self._check(config)
+        view = vtsbench.load(dataset_path).split(split, "train")
+        states = view.index["state_idx"].to_pylist() if "state_idx" in \
+            view.index.column_names else []
+        keep = [i for i, s in enumerate(states) if s is not None]
+        if not keep:
+            raise VtsError(f"no slip samples with a known state in {split}/train")
+        seed_everything(seed)  # the heads' random init depends on the seed
+        model = self._model(config, pretrained=None)
+        data = Subset(self._view_torch(view, model, config), keep)
+        modality, scale, lam = config["modality"], float(config["depth_scale_mm"]), \
+            float(config["lambda_dir"])
+
+        def loss_fn(net: torch.nn.Module, batch: Any, dev: torch.device) -> torch.Tensor:
+            x, target = batch
+            x = _normalize(x.to(dev), modality, scale)
+            state_logits, dir_logits = net(x)
+            return masked_joint_loss(state_logits, dir_logits, target["state_idx"].to(dev),
+                                     target["direction"].to(dev), lam=lam)
+
+        cfg = TrainConfig(
+            steps=int(config["steps"]), batch_size=int(config["batch_size"]),
+            lr=float(config["lr"]), weight_decay=float(config["weight_decay"]),
+            warmup_steps=int(config["warmup_steps"]), schedule=config["schedule"],
+            grad_clip=config["grad_clip"], checkpoint_every=int(config["checkpoint_every"]),
+            amp=bool(config["amp"]),
+            extra={"recipe": self.name, "recipe_config": json.dumps(config), "split": split})
+        res = train_loop(model, loss_fn, data, out_dir, cfg, seed=seed, device=device,
+                         resume=resume, progress=progress)
+        return res.checkpoint
+
+    def predict(self, checkpoint: str | Path, dataset_path: str | Path, split: str,
+                part: str = "test", *, device: str = "auto",
+                progress: bool = False) -> list[dict[str, Any]]:
+        import torch
+        from safetensors import safe_open
+
+        import vtsbench
+        from vtsbench.training import load_checkpoint, resolve_device
+
+        with safe_open(str(checkpoint), framework="pt") as fh:
+            meta = fh.metadata() or {}
+        if meta.get("recipe") != self.name:
+            raise VtsError("not a timesformer recipe checkpoint", checkpoint)
+        config = json.loads(meta["recipe_config"])
+        model = self._model(config, pretrained=False)
+        load_checkpoint(checkpoint, model)
+        dev = resolve_device(device)
+        model.to(dev).eval()
+        view = vtsbench.load(dataset_path).split(split, part)
+        data = self._view_torch(view, model, config)
+        modality, scale = config["modality"], float(config["depth_scale_mm"])
+        rows: list[dict[str, Any]] = []
+        self.latency_s = []
+        with torch.inference_mode():
+            for i in progress_iter(range(len(data)), len(data), f"timesformer ({part})",
+                                   progress):
+                x, target = data[i]
+                x = x.unsqueeze(0).to(dev)
+                t0 = time.perf_counter()
+                state_logits, dir_logits = model(_normalize(x, modality, scale))
+                ps, pd = state_logits[0].cpu(), dir_logits[0].cpu()
+                self.latency_s.append(time.perf_counter() - t0)
+                sid = target["sample_id"]
+                rows.append({"sample_id": sid, "task": "state", "pred": STATES[int(ps.argmax())]})
+                rows.append({"sample_id": sid, "task": "direction", "pred": int(pd.argmax())})
+        return rows
+
+
+RECIPE = TimesformerRecipe()

@@ -1,0 +1,61 @@
+"""The ResNet-50 recipe: a few training steps at a small size, predict, eval and Grad-CAM."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from vtsbench.recipes import load_recipe
+
+pytest_plugins = ["loader_conftest"]
+
+RECIPE = Path(__file__).resolve().parents[1] / "recipes" / "resnet.py"
+SPLIT = "static_sessions"
+TINY = {"image_size": 32, "steps": 2, "batch_size": 2, "warmup_steps": 0,
+        "checkpoint_every": 1, "gradcam": 2}
+
+
+def test_resnet_cli_train_predict_eval(vts_dataset: Path, tmp_path: Path) -> None:
+    from PIL import Image
+    from typer.testing import CliRunner
+
+    import vtsbench
+    from vtsbench.cli import app
+
+    cfg = tmp_path / "tiny.json"
+    cfg.write_text(json.dumps(TINY))
+    runner = CliRunner()
+    out = tmp_path / "run"
+    res = runner.invoke(app, ["train", str(RECIPE), "--dataset", str(vts_dataset), "--split",
+                              SPLIT, "--out", str(out), "--config", str(cfg), "--quiet"])
+    assert res.exit_code == 0, res.output
+    ckpt = out / "checkpoint.safetensors"
+    assert ckpt.is_file()
+    test_ids = vtsbench.load(vts_dataset).split(SPLIT, "test").ids
+    pngs = sorted((out / "gradcam").glob("*.png"))
+    assert len(pngs) == min(2, len(test_ids)) > 0
+    assert Image.open(pngs[0]).size == (32, 32)
+    sub = tmp_path / "resnet.csv"
+    res = runner.invoke(app, ["predict", "resnet", str(ckpt), "--dataset", str(vts_dataset),
+                              "--split", SPLIT, "--out", str(sub)])
+    assert res.exit_code == 0, res.output
+    meta = json.loads((tmp_path / "resnet.meta.json").read_text())
+    assert meta["method"] == "resnet" and meta["latency_ms_per_sample_median"] > 0
+    res = runner.invoke(app, ["eval", str(sub), "--dataset", str(vts_dataset), "--split",
+                              SPLIT, "--out", str(tmp_path / "ev"), "--no-figures"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads((tmp_path / "ev" / "metrics.json").read_text())
+    assert set(doc["tasks"]) == {"object"}
+
+
+def test_resnet_depth_predicts_every_sample(vts_dataset: Path, tmp_path: Path) -> None:
+    import vtsbench
+
+    rec = load_recipe(RECIPE)
+    config = {**rec.default_config(), **TINY, "modality": "depth", "steps": 1, "gradcam": 0}
+    ckpt = rec.train(vts_dataset, SPLIT, tmp_path, config, progress=False)
+    assert not (tmp_path / "gradcam").exists()
+    rows = rec.predict(ckpt, vts_dataset, SPLIT, "train")
+    ds = vtsbench.load(vts_dataset)
+    assert [r["sample_id"] for r in rows] == list(ds.split(SPLIT, "train").ids)
+    assert all(0 <= r["pred"] < len(ds.info.objects) for r in rows)
