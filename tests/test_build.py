@@ -146,6 +146,7 @@ def test_missing_calibration_says_how_to_make_one(sim_recordings: Path, tmp_path
     res = CliRunner().invoke(app, ["build", str(rec), str(tmp_path / "ds")])
     assert res.exit_code == 2
     assert "vtsbench calibrate" in res.output and len(res.output.strip().splitlines()) == 1
+    assert "--no-depth" in res.output
     assert not (tmp_path / "ds").exists()
 
 

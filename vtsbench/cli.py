@@ -184,6 +184,9 @@ def build(
              "`vtsbench calibrate RECORDINGS --out RECORDINGS/calibration.safetensors`).")
     ] = None,
     solver: Annotated[str, typer.Option(help="Depth solver: dct, dst or masked.")] = "dct",
+    no_depth: Annotated[bool, typer.Option(
+        "--no-depth", help="RGB only: no depth or contact arrays, no calibration needed (for "
+                           "sensors without calibration presses).")] = False,
     frames: Annotated[int, typer.Option(min=1, help="Frames per slip sample (T).")] = 8,
     workers: Annotated[int, typer.Option(
         min=1, help="Worker processes (or Dask workers with --scheduler local).")] = 1,
@@ -203,7 +206,8 @@ def build(
         help="Target uncompressed RGB shard size in MB (whole samples per shard).")] = 32.0,
     quiet: Annotated[bool, typer.Option(help="No progress bars.")] = False,
 ) -> None:
-    """Build an RGB-D dataset (Zarr + parquet index + splits + card) from a recordings folder.
+    """Build an RGB-D dataset (Zarr + parquet index + splits + card) from a recordings folder
+    (RGB only with --no-depth).
 
     Atomic and resumable: writes into .OUT.partial beside OUT; rerun the same command after an
     interruption and finished shards are kept. Example:
@@ -215,7 +219,8 @@ def build(
     from .dataset.build import build as run_build
 
     console = Console(stderr=True, highlight=False)
-    opts = BuildOptions(calibration=calibration, solver=solver, frames=frames, workers=workers,
+    opts = BuildOptions(calibration=calibration, solver=solver, depth=not no_depth,
+                        frames=frames, workers=workers,
                         scheduler=scheduler, skip_bad=skip_bad, overwrite=overwrite,
                         version=version, compression_level=compression_level, seed=seed,
                         shard_mb=shard_mb, progress=not quiet)

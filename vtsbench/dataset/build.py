@@ -26,7 +26,7 @@ import numpy as np
 from ..errors import VtsError
 from ..recordings.manifest import Entry, Manifest
 from .schema import SampleMeta
-from .store import ARRAYS, KINDS, TMP_SUFFIX, Layout
+from .store import ARRAYS, KINDS, RGB_ONLY, TMP_SUFFIX, Layout
 
 CALIBRATION_NAME = "calibration.safetensors"
 #: Bumped whenever the bytes a shard task writes change for the same inputs.
@@ -42,6 +42,7 @@ class BuildOptions:
 
     calibration: Path | None = None
     solver: str = "dct"
+    depth: bool = True  # False: --no-depth, rgb arrays only and no calibration
     frames: int = 8
     workers: int = 1
     scheduler: str | None = None
@@ -146,7 +147,8 @@ def resolve_calibration(root: Path, path: Path | None) -> Path:
     default = root / CALIBRATION_NAME
     if not default.is_file():
         raise VtsError(f"no calibration: make one with `vtsbench calibrate {root} --out "
-                       f"{default}` (or pass --calibration FILE)")
+                       f"{default}` (or pass --calibration FILE), or build RGB only with "
+                       "--no-depth")
     return default.resolve()
 
 
@@ -223,21 +225,26 @@ def _windows(root: Path, e: Entry, frames: int) -> list[tuple[str, int, int]]:
 
 
 def make_plan(root: Path, manifest: Manifest, bad: dict[str, str], *, frames: int,
-              resolution: tuple[int, int], mm_per_px: tuple[float, float],
-              samples_per_shard: dict[str, int], level: int) -> Plan:
-    """Samples in manifest order (windows in order), rows, class indices and layouts."""
+              resolution: tuple[int, int], mm_per_px: tuple[float, float] | None,
+              samples_per_shard: dict[str, int], level: int,
+              arrays: tuple[str, ...] = ARRAYS) -> Plan:
+    """Samples in manifest order (windows in order), rows, class indices and layouts.
+
+    mm_per_px: the calibration's, for sessions that have none (None without a calibration:
+    their samples' scale is then unknown, null in the index)."""
     rows: dict[str, list[tuple[dict[str, Any], SampleSource]]] = {k: [] for k in KINDS}
     for e in manifest.entries:
         if e.kind == "press" or e.id in bad:
             continue
         kind = "static" if e.kind == "static" else "slip"
         ses = manifest.session(e.session)
-        mx, my = ses.mm_per_px or mm_per_px
+        mx, my = ses.mm_per_px or mm_per_px or (None, None)
         lab = e.labels
         for sid, a, b in _windows(root, e, frames):
             d: dict[str, Any] = {
                 "sample_id": sid, "kind": kind, "object": e.object, "session": ses.id,
-                "sensor": ses.sensor, "mm_per_px_x": float(mx), "mm_per_px_y": float(my),
+                "sensor": ses.sensor, "mm_per_px_x": None if mx is None else float(mx),
+                "mm_per_px_y": None if my is None else float(my),
                 "source": f"{e.source.path}[{a}:{b}]", "press_depth_mm": lab.press_depth_mm,
                 "contact_x_px": None if lab.contact_px is None else lab.contact_px[0],
                 "contact_y_px": None if lab.contact_px is None else lab.contact_px[1]}
@@ -257,7 +264,8 @@ def make_plan(root: Path, manifest: Manifest, bad: dict[str, str], *, frames: in
     metas = {kind: [SampleMeta(**d, row=i, class_idx=objects.index(d["object"]))
                     for i, (d, _) in enumerate(rows[kind])] for kind in KINDS}
     layouts = {kind: Layout(kind, len(rows[kind]), resolution,
-                            frames if kind == "slip" else None, samples_per_shard[kind], level)
+                            frames if kind == "slip" else None, samples_per_shard[kind], level,
+                            arrays)
                for kind in KINDS}
     return Plan(metas, {k: [s for _, s in rows[k]] for k in KINDS}, layouts, objects,
                 dict(bad))
@@ -328,15 +336,17 @@ class SourceStats:
         return [st.st_size, st.st_mtime_ns]
 
 
-def shard_tasks(plan: Plan, root: Path, stage: Path, calibration: Path, cal_sha: str,
+def shard_tasks(plan: Plan, root: Path, stage: Path, calibration: Path | None, cal_sha: str,
                 solver: str) -> list[ShardTask]:
     """One task per shard of each kind, with the fingerprint of everything its bytes use."""
     stats = SourceStats(root)
     from .card import PREVIEW_SAMPLES, preview_rows
     from .depthmaps import CONTACT_PARAMS
 
+    depth = "depth" in plan.layouts["static"].arrays
     base = {"version": FINGERPRINT_VERSION, "versions": _versions(), "calibration": cal_sha,
-            "solver": solver, "contact": CONTACT_PARAMS}
+            "solver": solver if depth else None, "contact": CONTACT_PARAMS if depth else None,
+            "arrays": list(plan.layouts["static"].arrays)}
     tasks = []
     for kind in KINDS:
         lay = plan.layouts[kind]
@@ -351,7 +361,8 @@ def shard_tasks(plan: Plan, root: Path, stage: Path, calibration: Path, cal_sha:
                                for s in samples]}
             fp = hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
             tasks.append(ShardTask(kind, k, str(root), str(group), str(_marker(stage, kind, k)),
-                                   lay, samples, str(calibration), cal_sha, solver, fp,
+                                   lay, samples, "" if calibration is None else str(calibration),
+                                   cal_sha, solver, fp,
                                    tuple(i for i, r in enumerate(rows) if r in shown)))
     return tasks
 
@@ -370,7 +381,7 @@ def shard_done(task: ShardTask) -> bool:
         return False
     group = Path(task.group_dir)
     sizes = doc.get("sizes", {})
-    for name in ARRAYS:
+    for name in task.layout.arrays:
         p = group / task.layout.shard_key(name, task.k)
         if not p.is_file() or p.stat().st_size != sizes.get(name):
             return False
@@ -449,17 +460,18 @@ def run_shard(task: ShardTask) -> ShardResult:
         frames.append(x if lay.frames else x[0])
     if bad:
         return ShardResult(task.kind, task.k, bad=bad)
-    cal = _calibration(task.calibration, task.calibration_sha)
     rgb = np.stack(frames)
-    depth = np.empty(rgb.shape[:-1], np.int16)
-    contact = np.empty(rgb.shape[:-1], bool)
-    for i in range(len(rgb)):  # one sample at a time bounds the float32 working memory
-        d, c = depth_and_contact(rgb[i] if lay.frames else rgb[i:i + 1], cal, task.solver)
-        depth[i] = depth_to_int16(d if lay.frames else d[0])
-        contact[i] = c if lay.frames else c[0]
+    blocks = {"rgb": rgb}
+    if "depth" in lay.arrays:
+        cal = _calibration(task.calibration, task.calibration_sha)
+        depth = blocks["depth"] = np.empty(rgb.shape[:-1], np.int16)
+        contact = blocks["contact"] = np.empty(rgb.shape[:-1], bool)
+        for i in range(len(rgb)):  # one sample at a time bounds the float32 working memory
+            d, c = depth_and_contact(rgb[i] if lay.frames else rgb[i:i + 1], cal, task.solver)
+            depth[i] = depth_to_int16(d if lay.frames else d[0])
+            contact[i] = c if lay.frames else c[0]
     _check_parent()
     digests: dict[str, str] = {}
-    blocks = {"rgb": rgb, "depth": depth, "contact": contact}
     sizes = write_shard(Path(task.group_dir), lay, task.k, blocks, digests)
     marker.parent.mkdir(parents=True, exist_ok=True)
     write_json(marker, {"fingerprint": task.fingerprint, "sizes": sizes, "sha256": digests})
@@ -474,7 +486,7 @@ def _previews(task: ShardTask, blocks: dict[str, np.ndarray]) -> dict[int, dict[
 
     first = task.layout.shard_rows(task.k).start
     return {first + i: {name: frame_pngs(name, blocks[name][i], task.layout.frames is not None)
-                        for name in ARRAYS} for i in task.preview}
+                        for name in task.layout.arrays} for i in task.preview}
 
 
 def _relative(text: str, root: Path) -> str:
@@ -703,7 +715,7 @@ def remove_stale(stage: Path, plan: Plan) -> None:
     for kind in KINDS:
         lay = plan.layouts[kind]
         group = stage / "data" / f"{kind}.zarr"
-        keep = {group / lay.shard_key(n, k) for n in ARRAYS for k in range(lay.n_shards)}
+        keep = {group / lay.shard_key(n, k) for n in lay.arrays for k in range(lay.n_shards)}
         for name in ARRAYS:
             chunks = group / name / "c"
             if chunks.is_dir():
@@ -749,6 +761,8 @@ def _check_options(opts: BuildOptions) -> None:
         raise VtsError(f"--workers must be at least 1, got {opts.workers}")
     if opts.solver not in SOLVERS:
         raise VtsError(f"--solver must be one of {', '.join(SOLVERS)}, got {opts.solver!r}")
+    if not opts.depth and opts.calibration is not None:
+        raise VtsError("--calibration makes the depth; a build with --no-depth takes none")
     if not 0 <= opts.compression_level <= 22:
         raise VtsError(f"--compression-level must be 0 (none) to 22, got "
                        f"{opts.compression_level}")
@@ -766,6 +780,21 @@ def _semver(text: str) -> bool:
 
     return re.fullmatch(r"(0|[1-9]\d*)\.(0|[1-9]\d*)\.(0|[1-9]\d*)(-[0-9A-Za-z.-]+)?"
                         r"(\+[0-9A-Za-z.-]+)?", text) is not None
+
+
+def _session_resolution(manifest: Manifest, sessions: set[str]) -> tuple[int, int]:
+    """The frame size of a build without a calibration: that of its sessions, which must all
+    have the same (a dataset has one)."""
+    sizes: dict[tuple[int, int], str] = {}
+    for sid in sorted(sessions):
+        sizes.setdefault(tuple(manifest.session(sid).resolution), sid)
+    if len(sizes) > 1:
+        (a, sa), (b, sb) = list(sizes.items())[:2]
+        raise VtsError(f"sessions {sa} ({a[0]}x{a[1]}) and {sb} ({b[0]}x{b[1]}) differ in frame "
+                       "size; a dataset has one: build them apart")
+    if not sizes:  # nothing to build: the plan says so
+        return (1, 1)
+    return next(iter(sizes))
 
 
 def _load_checked_calibration(path: Path, manifest: Manifest, plan_sessions: set[str]) -> Any:
@@ -812,16 +841,19 @@ def build(recordings: str | Path, out: str | Path, opts: BuildOptions | None = N
     root, out = Path(recordings).resolve(), Path(out).resolve()
     check_out(root, out, opts.overwrite)
     manifest = load_manifest(root)
-    cal_path = resolve_calibration(root, opts.calibration)
+    cal_path = resolve_calibration(root, opts.calibration) if opts.depth else None
     with ExitStack() as stack:
         # the workers start (and import) while this process checks the recordings and plans
         pool = (stack.enter_context(process_pool(opts.workers))
                 if opts.workers > 1 and not opts.scheduler else None)
         bad, warnings = screen_entries(root, manifest, opts.frames, max(2, opts.workers))
         used = {e.session for e in manifest.entries if e.kind != "press" and e.id not in bad}
-        cal = _load_checked_calibration(cal_path, manifest, used)
-        cal_sha = sha256_file(cal_path)
-        level, res = opts.compression_level, cal.resolution
+        if cal_path is not None:
+            cal = _load_checked_calibration(cal_path, manifest, used)
+            cal_sha, res, scale = sha256_file(cal_path), cal.resolution, cal.mm_per_px
+        else:  # --no-depth
+            cal, cal_sha, res, scale = None, "", _session_resolution(manifest, used), None
+        level = opts.compression_level
         from .store import samples_per_shard
 
         sps = {k: samples_per_shard(res, opts.frames if k == "slip" else None,
@@ -835,7 +867,8 @@ def build(recordings: str | Path, out: str | Path, opts: BuildOptions | None = N
         previews: dict[str, Any] = {}
         while True:
             plan = make_plan(root, manifest, bad, frames=opts.frames, resolution=res,
-                             mm_per_px=cal.mm_per_px, samples_per_shard=sps, level=level)
+                             mm_per_px=scale, samples_per_shard=sps, level=level,
+                             arrays=ARRAYS if opts.depth else RGB_ONLY)
             if not plan.samples:
                 raise VtsError("nothing to build: no usable static or sequence entries "
                                "(calibration presses are not samples)", root)
@@ -952,7 +985,7 @@ def shard_digests(stage: Path, tasks: list[ShardTask]) -> dict[str, str]:
     out = {}
     for t in tasks:
         doc = json.loads(Path(t.marker).read_text())
-        for name in ARRAYS:
+        for name in t.layout.arrays:
             path = Path(t.group_dir) / t.layout.shard_key(name, t.k)
             out[path.relative_to(stage).as_posix()] = doc["sha256"][name]
     return out
@@ -963,24 +996,29 @@ def _checksummed(rel: str) -> bool:
     return rel.startswith(("data/", "index/", "meta/splits/"))
 
 
-def build_params(manifest: Manifest, root: Path, cal_path: Path, opts: BuildOptions,
+def build_params(manifest: Manifest, root: Path, cal_path: Path | None, opts: BuildOptions,
                  solver_note: str) -> dict[str, Any]:
-    """The parameters recorded in info.json: what made the bytes, nothing about how it ran."""
+    """The parameters recorded in info.json: what made the bytes, nothing about how it ran.
+    Without depth (--no-depth) the depth, contact, calibration and solver are null."""
     from .depthmaps import CONTACT_PARAMS
     from .store import DEPTH_MAX_MM, DEPTH_MIN_MM, DEPTH_SCALE_MM
 
+    depth = cal_path is not None
     return {
         "recordings": {"name": manifest.name or root.name,
                        "manifest_sha256": sha256_file(root / "recordings.json"),
                        "entries": len(manifest.entries)},
-        "calibration_file": cal_path.name, "solver": opts.solver, "frames": opts.frames,
+        "arrays": list(ARRAYS if depth else RGB_ONLY),
+        "calibration_file": cal_path.name if depth else None,
+        "solver": opts.solver if depth else None, "frames": opts.frames,
         "compression_level": opts.compression_level, "shard_mb": opts.shard_mb,
         "seed": opts.seed, "skip_bad": opts.skip_bad,
         "depth": {"dtype": "int16", "scale_mm": DEPTH_SCALE_MM,
-                  "clipped_to_mm": [DEPTH_MIN_MM, DEPTH_MAX_MM], "method": solver_note},
+                  "clipped_to_mm": [DEPTH_MIN_MM, DEPTH_MAX_MM], "method": solver_note}
+        if depth else None,
         "contact": {"method": "colour distance of the calibration's blurred difference to its "
                               "background, cleaned by vtsbench.depth.mask.clean_mask",
-                    "params": CONTACT_PARAMS},
+                    "params": CONTACT_PARAMS} if depth else None,
         "versions": _versions(),
     }
 
@@ -1006,7 +1044,7 @@ def write_plan_files(stage: Path, plan: Plan, splits: Any) -> dict[str, str]:
 
 def finish(stage: Path, out: Path, plan: Plan, splits: Any, split_sha: dict[str, str],
            tasks: list[ShardTask], previews: dict[str, Any], *, manifest: Manifest,
-           root: Path, cal: Any, cal_sha: str, cal_path: Path,
+           root: Path, cal: Any, cal_sha: str, cal_path: Path | None,
            opts: BuildOptions) -> dict[str, int]:
     """Write everything but the shards and the plan files, checksum it, and rename the stage
     to OUT."""
@@ -1019,12 +1057,14 @@ def finish(stage: Path, out: Path, plan: Plan, splits: Any, split_sha: dict[str,
         name=manifest.name or root.name, vtsbench_version=package_version(),
         frames_per_sequence=opts.frames, resolution=lay["static"].frame,
         objects=plan.objects, counts=Counts.of(plan.samples, splits.splits),
-        shapes={k: {n: lay[k].shape(n) for n in ARRAYS} for k in KINDS},
+        shapes={k: {n: lay[k].shape(n) for n in lay[k].arrays} for k in KINDS},
         zarr=ZarrSettings({k: lay[k].samples_per_shard for k in KINDS},
                           "zstd" if opts.compression_level else "none", opts.compression_level),
         dataset_version=opts.version, created_by="vtsbench build",
-        calibration=Calibration(cal.sensor, cal.method, cal_sha), splits=split_sha,
-        build=build_params(manifest, root, cal_path, opts, f"{cal.method} + {opts.solver}"))
+        calibration=None if cal is None else Calibration(cal.sensor, cal.method, cal_sha),
+        splits=split_sha,
+        build=build_params(manifest, root, cal_path, opts,
+                           "" if cal is None else f"{cal.method} + {opts.solver}"))
     content = hash_files(stage, _checksummed, shard_digests(stage, tasks))
     info.dataset_sha256 = dataset_checksum(content)
     write_preview(stage, plan, opts.workers, previews)

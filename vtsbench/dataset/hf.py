@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import datasets
 
-from .loader import ARRAYS, ITER_BYTES
+from .loader import ITER_BYTES
 
 if TYPE_CHECKING:
     from .loader import View
@@ -24,8 +24,10 @@ _ARRAY_FEATURES = {2: datasets.Array2D, 3: datasets.Array3D, 4: datasets.Array4D
                    5: datasets.Array5D}
 
 
-def features(view: View, arrays: Sequence[str] = ARRAYS) -> datasets.Features:
-    """The index columns (as in the parquet) plus one fixed-shape feature per array."""
+def features(view: View, arrays: Sequence[str] | None = None) -> datasets.Features:
+    """The index columns (as in the parquet) plus one fixed-shape feature per array (default:
+    every array the dataset has)."""
+    arrays = view.arrays if arrays is None else arrays
     feats = datasets.Features.from_arrow_schema(view.index.schema)
     shapes = view.dataset.info.shapes[view.kind]
     for name in arrays:
@@ -46,10 +48,14 @@ def _rows(view: View, arrays: tuple[str, ...], batch: int,
             yield {**row, **{n: a[k] for n, a in data.items()}}
 
 
-def to_hf(view: View, arrays: Sequence[str] = ARRAYS, *, writer_batch_size: int = 8,
+def to_hf(view: View, arrays: Sequence[str] | None = None, *, writer_batch_size: int = 8,
           cache_dir: str | os.PathLike | None = None) -> datasets.Dataset:
-    """A datasets.Dataset of the view's samples (index columns + arrays), built offline."""
-    arrays = tuple(arrays)
+    """A datasets.Dataset of the view's samples (index columns + arrays, default: every array
+    the dataset has), built offline."""
+    arrays = view.arrays if arrays is None else tuple(arrays)
+    from .loader import check_arrays
+
+    check_arrays(view.dataset.info, arrays)
     feats = features(view, arrays)
     if not len(view):
         return datasets.Dataset.from_dict({k: [] for k in feats}, features=feats)

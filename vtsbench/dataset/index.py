@@ -1,7 +1,8 @@
 """The parquet index of a dataset (`index/static.parquet`, `index/slip.parquet`): write and read.
 
-Rows are written in Zarr row order with the schema of `schema.index_schema(kind)`; the writer's
-settings are fixed, so the same rows give the same bytes.
+Rows are written in Zarr row order with the schema of `schema.index_schema(kind)` (its variant
+with nullable mm_per_px columns when a sample's scale is unknown, which only a build without
+depth allows); the writer's settings are fixed, so the same rows give the same bytes.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import VtsError
-from .schema import SampleMeta, index_schema
+from .schema import SampleMeta, index_schema, index_schema_of
 
 #: Parquet settings: zstd pages, one row group (an index is small), statistics on.
 PARQUET_OPTIONS: dict[str, Any] = {"compression": "zstd", "compression_level": 3,
@@ -29,7 +30,8 @@ def index_bytes(kind: str, metas: Sequence[SampleMeta]) -> bytes:
         if m.kind != kind or m.row != i:
             raise ValueError(f"index row {i}: sample {m.sample_id!r} ({m.kind}, row {m.row}) is "
                              f"out of place in the {kind} index")
-    table = pa.Table.from_pylist([m.to_row() for m in metas], schema=index_schema(kind))
+    known = all(m.mm_per_px_x is not None and m.mm_per_px_y is not None for m in metas)
+    table = pa.Table.from_pylist([m.to_row() for m in metas], schema=index_schema(kind, known))
     buf = io.BytesIO()
     pq.write_table(table, buf, **PARQUET_OPTIONS)
     return buf.getvalue()
@@ -54,8 +56,7 @@ def read_index(path: Path, kind: str) -> list[SampleMeta]:
         table = pq.read_table(path)
     except (pa.ArrowException, OSError) as e:
         raise VtsError(f"not a readable parquet file ({e})", path) from None
-    want = index_schema(kind)
-    if not table.schema.remove_metadata().equals(want):
+    if index_schema_of(table.schema, kind) is None:
         have = ", ".join(f"{f.name}: {f.type}" for f in table.schema)
         raise VtsError(f"columns differ from the {kind} index schema (found {have})", path)
     try:

@@ -20,7 +20,7 @@ from zarr.storage import WrapperStore
 
 from ..errors import VtsError
 from . import store
-from .schema import INFO_PATH, KINDS, DatasetInfo, SplitFile, index_schema, load_info
+from .schema import INFO_PATH, KINDS, DatasetInfo, SplitFile, index_schema_of, load_info
 from .splits import read_split
 
 if TYPE_CHECKING:
@@ -185,9 +185,7 @@ class KindStore:
     def read(self, rows: np.ndarray, names: Sequence[str],
              frames: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Arrays of Zarr rows (any order, repeats allowed), one zarr call per contiguous run."""
-        for n in names:
-            if n not in ARRAYS:
-                raise VtsError(f"unknown array {n!r}; arrays are {', '.join(ARRAYS)}")
+        check_arrays(self.info, names)
         if frames is not None and self.kind != "slip":
             raise VtsError("frames apply to slip sequences only")
         uniq, inverse = np.unique(rows, return_inverse=True)
@@ -203,6 +201,17 @@ class KindStore:
                 data = _depth_mm(data, self.info.depth_scale_mm)
             out[n] = data
         return out
+
+
+def check_arrays(info: DatasetInfo, names: Sequence[str], what: str = "") -> None:
+    """A one-line error for an array name the dataset does not hold (depth and contact in a
+    dataset built with --no-depth); `what` says what asked for it."""
+    for n in names:
+        if n not in ARRAYS:
+            raise VtsError(f"unknown array {n!r}; arrays are {', '.join(ARRAYS)}")
+        if n not in info.arrays:
+            raise VtsError(f"{what or 'reading ' + repr(n)} needs the {n} array, and this dataset "
+                           f"has none (built with --no-depth: {', '.join(info.arrays)} only)")
 
 
 def _read_runs(arr: Any, runs: list[tuple[int, int]], n: int,
@@ -276,9 +285,14 @@ class View:
         """The index rows of this view (pyarrow Table)."""
         return self._kind.table.take(self._pos)
 
-    def nbytes(self, arrays: Sequence[str] = ARRAYS) -> int:
-        """Decoded bytes of one sample's arrays (depth as float32 mm)."""
-        return self._kind.sample_nbytes(arrays)
+    @property
+    def arrays(self) -> tuple[str, ...]:
+        """The arrays of the dataset: rgb, depth and contact, or rgb alone (--no-depth)."""
+        return self._ds.info.arrays
+
+    def nbytes(self, arrays: Sequence[str] | None = None) -> int:
+        """Decoded bytes of one sample's arrays (default: all it has; depth as float32 mm)."""
+        return self._kind.sample_nbytes(self.arrays if arrays is None else arrays)
 
     def _positions(self, items: Any) -> np.ndarray:
         """View positions (int, slice, sequence) -> index positions; out of range is an error."""
@@ -293,12 +307,13 @@ class View:
         return self._pos[idx]
 
     def __getitem__(self, i: int | slice) -> dict[str, Any] | View:
-        """A sample (dict: index fields plus rgb, depth in mm, contact), or a sub-view."""
+        """A sample (dict: index fields plus rgb, depth in mm, contact; rgb alone in a dataset
+        built with --no-depth), or a sub-view."""
         if isinstance(i, slice):
             return View(self._ds, self.kind, self._pos[i])
         if not isinstance(i, int | np.integer):
             raise TypeError(f"view indices are integers or slices, not {type(i).__name__}")
-        return self._sample(int(self._positions([i])[0]), ARRAYS)
+        return self._sample(int(self._positions([i])[0]), self.arrays)
 
     def _sample(self, pos: int, names: Sequence[str]) -> dict[str, Any]:
         arrays = self._kind.read(self._kind.rows[[pos]], names)
@@ -306,10 +321,10 @@ class View:
 
     def __iter__(self) -> Iterator[dict[str, Any]]:
         """Samples in view order, read a few contiguous rows per zarr call."""
-        step = max(1, ITER_BYTES // max(1, self._kind.sample_nbytes(ARRAYS)))
+        step = max(1, ITER_BYTES // max(1, self._kind.sample_nbytes(self.arrays)))
         for start in range(0, len(self), step):
             pos = self._pos[start:start + step]
-            arrays = self._kind.read(self._kind.rows[pos], ARRAYS)
+            arrays = self._kind.read(self._kind.rows[pos], self.arrays)
             for k, p in enumerate(pos):
                 yield {**self._kind.meta(int(p)), **{n: a[k] for n, a in arrays.items()}}
 
@@ -317,17 +332,18 @@ class View:
         """Index fields of several samples (view positions); reads no array."""
         return [self._kind.meta(int(p)) for p in self._positions(items)]
 
-    def sample(self, i: int, arrays: Sequence[str] = ARRAYS) -> dict[str, Any]:
-        """Sample i with only the arrays named (e.g. ("rgb",)), to read less."""
-        return self._sample(int(self._positions([i])[0]), tuple(arrays))
+    def sample(self, i: int, arrays: Sequence[str] | None = None) -> dict[str, Any]:
+        """Sample i with only the arrays named (e.g. ("rgb",)), to read less (default: all)."""
+        return self._sample(int(self._positions([i])[0]),
+                            self.arrays if arrays is None else tuple(arrays))
 
-    def by_id(self, sample_id: str, arrays: Sequence[str] = ARRAYS) -> dict[str, Any]:
+    def by_id(self, sample_id: str, arrays: Sequence[str] | None = None) -> dict[str, Any]:
         """The sample with this id; an id not in this view is an error."""
         pos = self._kind.position(sample_id)
         if pos is None or not np.any(self._pos == pos):
             where = "this view" if pos is not None else f"the {self.kind} index"
             raise VtsError(f"unknown sample id {sample_id!r} (not in {where})")
-        return self._sample(pos, tuple(arrays))
+        return self._sample(pos, self.arrays if arrays is None else tuple(arrays))
 
     def read(self, items: Any, arrays: Sequence[str] = ("rgb",),
              frames: Sequence[int] | None = None) -> dict[str, np.ndarray]:
@@ -338,6 +354,7 @@ class View:
         """
         pos = self._positions(items)
         fr = None if frames is None else self._frame_numbers(frames)
+        check_arrays(self._ds.info, arrays)
         if not len(pos):
             return {n: np.empty((0, *self._shape(n, fr)), _dtype(n)) for n in arrays}
         return self._kind.read(self._kind.rows[pos], tuple(arrays), fr)
@@ -393,13 +410,14 @@ class View:
         return TorchView(self, modality=modality, size=size, frames=frames, transform=transform,
                          targets=targets)
 
-    def to_hf(self, arrays: Sequence[str] = ARRAYS, *, writer_batch_size: int = 8,
+    def to_hf(self, arrays: Sequence[str] | None = None, *, writer_batch_size: int = 8,
               cache_dir: str | os.PathLike | None = None) -> datasets.Dataset:
-        """A Hugging Face datasets.Dataset of index rows plus arrays; see dataset.hf."""
+        """A Hugging Face datasets.Dataset of index rows plus arrays (default: all the dataset
+        has); see dataset.hf."""
         from .hf import to_hf
 
-        return to_hf(self, arrays=arrays, writer_batch_size=writer_batch_size,
-                     cache_dir=cache_dir)
+        return to_hf(self, arrays=self.arrays if arrays is None else arrays,
+                     writer_batch_size=writer_batch_size, cache_dir=cache_dir)
 
 
 def _part_key(part: str) -> tuple[int, int, str]:
@@ -430,6 +448,11 @@ class VtsDataset:
     def location(self) -> str:
         """The folder or URL it was loaded from."""
         return self.loc.url
+
+    @property
+    def arrays(self) -> tuple[str, ...]:
+        """The arrays it holds: rgb, depth and contact, or rgb alone (built with --no-depth)."""
+        return self.info.arrays
 
     def view(self, kind: str) -> View:
         """Every sample of one kind ("static" or "slip")."""
@@ -484,7 +507,7 @@ class VtsDataset:
         split = self.split_file(name)
         return View(self, split.kind, self._part_positions(split, part))
 
-    def by_id(self, sample_id: str, arrays: Sequence[str] = ARRAYS) -> dict[str, Any]:
+    def by_id(self, sample_id: str, arrays: Sequence[str] | None = None) -> dict[str, Any]:
         """A sample of either kind by id."""
         for kind in KINDS:
             if self._kinds[kind].position(sample_id) is not None:
@@ -508,7 +531,7 @@ def _read_index(loc: Location, kind: str, info: DatasetInfo) -> pa.Table:
         raise VtsError("index not found", loc.path(rel)) from None
     except pa.ArrowException as e:
         raise VtsError(f"not a readable parquet file ({e})", loc.path(rel)) from None
-    if not table.schema.remove_metadata().equals(index_schema(kind)):
+    if index_schema_of(table.schema, kind) is None:
         have = ", ".join(f"{f.name}: {f.type}" for f in table.schema)
         raise VtsError(f"columns differ from the {kind} index schema (found {have})",
                        loc.path(rel))

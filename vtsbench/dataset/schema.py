@@ -41,6 +41,9 @@ INDEX_COLUMNS = ("sample_id", "row", "object", "class_idx", "session", "sensor",
                  "mm_per_px_y", "press_depth_mm", "contact_x_px", "contact_y_px", "state",
                  "state_idx", "direction", "motion_dx_mm", "motion_dy_mm", "source")
 SLIP_ONLY = ("state", "state_idx", "direction", "motion_dx_mm", "motion_dy_mm")
+#: The arrays of a dataset, and of one built without depth (`vtsbench build --no-depth`).
+ARRAYS = ("rgb", "depth", "contact")
+RGB_ONLY = ("rgb",)
 
 
 @lru_cache(maxsize=len(SCHEMA_NAMES))
@@ -53,11 +56,15 @@ def schema(name: str) -> dict[str, Any]:
 
 def schema_errors(doc: Any, name: str, at: str = "") -> list[str]:
     """Every violation of schema `name` by doc (or by its `$defs` entry `at`), one line each."""
-    import jsonschema
-
     sch = schema(name)
     if at:
         sch = {"$schema": sch["$schema"], "$defs": sch["$defs"], "$ref": f"#/$defs/{at}"}
+    return _violations(sch, doc)
+
+
+def _violations(sch: dict[str, Any], doc: Any) -> list[str]:
+    import jsonschema
+
     validator = jsonschema.Draft202012Validator(sch)
     out = []
     for err in sorted(validator.iter_errors(doc), key=lambda e: list(map(str, e.absolute_path))):
@@ -85,8 +92,8 @@ class SampleMeta:
     class_idx: int
     session: str
     sensor: str
-    mm_per_px_x: float
-    mm_per_px_y: float
+    mm_per_px_x: float | None  # None only when the scale is unknown (built without depth)
+    mm_per_px_y: float | None
     source: str
     press_depth_mm: float | None = None
     contact_x_px: float | None = None
@@ -132,8 +139,12 @@ def _static_columns() -> tuple[str, ...]:
     return tuple(c for c in INDEX_COLUMNS if c not in SLIP_ONLY)
 
 
-def index_schema(kind: str) -> pyarrow.Schema:
-    """The pyarrow schema of index/<kind>.parquet (docs/dataset.md, Index columns)."""
+def index_schema(kind: str, scale_known: bool = True) -> pyarrow.Schema:
+    """The pyarrow schema of index/<kind>.parquet (docs/dataset.md, Index columns).
+
+    scale_known=False: mm_per_px_x and mm_per_px_y may be null, in a dataset built without
+    depth from sessions whose scale is unknown (every other dataset has them).
+    """
     import pyarrow as pa
 
     if kind not in KINDS:
@@ -146,8 +157,20 @@ def index_schema(kind: str) -> pyarrow.Schema:
              "direction": pa.int32(), "motion_dx_mm": pa.float64(), "motion_dy_mm": pa.float64(),
              "source": pa.string()}
     nullable = {"press_depth_mm", "contact_x_px", "contact_y_px", *SLIP_ONLY}
+    if not scale_known:
+        nullable |= {"mm_per_px_x", "mm_per_px_y"}
     cols = INDEX_COLUMNS if kind == "slip" else _static_columns()
     return pa.schema([pa.field(c, types[c], nullable=c in nullable) for c in cols])
+
+
+def index_schema_of(table_schema: pyarrow.Schema, kind: str) -> pyarrow.Schema | None:
+    """The index schema (either scale variant) a read table has, or None if neither."""
+    have = table_schema.remove_metadata()
+    for known in (True, False):
+        want = index_schema(kind, known)
+        if have.equals(want):
+            return want
+    return None
 
 
 @dataclass(frozen=True)
@@ -347,6 +370,18 @@ class DatasetInfo:
         """The class index of an object name (its index in the sorted `objects`)."""
         return self.objects.index(obj)
 
+    @property
+    def arrays(self) -> tuple[str, ...]:
+        """The arrays the dataset holds: rgb, depth and contact, or rgb alone (built with
+        --no-depth), in that order."""
+        names = {a for shapes in self.shapes.values() for a in shapes}
+        return tuple(a for a in ARRAYS if a in names)
+
+    @property
+    def has_depth(self) -> bool:
+        """False for a dataset built without depth (rgb only)."""
+        return "depth" in self.arrays
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "format": FORMAT, "format_version": self.format_version,
@@ -393,6 +428,28 @@ def dataset_checksum(files: Mapping[str, str]) -> str:
     return hashlib.sha256("".join(f"{p} {files[p]}\n" for p in keep).encode()).hexdigest()
 
 
+def _rgb_only(doc: Any) -> bool:
+    """Whether an info document describes a dataset of rgb arrays alone (--no-depth)."""
+    shapes = doc.get("shapes") if isinstance(doc, dict) else None
+    return (isinstance(shapes, dict) and bool(shapes)
+            and all(isinstance(v, dict) and set(v) == set(RGB_ONLY) for v in shapes.values()))
+
+
+def info_schema_errors(doc: Any) -> list[str]:
+    """schema_errors(doc, "dataset_info"), where a dataset built without depth (every kind's
+    shapes hold rgb alone, and no calibration) is valid too."""
+    if not _rgb_only(doc):
+        return schema_errors(doc, "dataset_info")
+    import copy
+
+    sch = copy.deepcopy(schema("dataset_info"))
+    sch["properties"]["shapes"]["additionalProperties"]["required"] = list(RGB_ONLY)
+    errs = _violations(sch, doc)
+    if doc.get("calibration") is not None:
+        errs.append("calibration: a dataset without depth has none (null)")
+    return errs
+
+
 def load_info(path: str | Path) -> DatasetInfo:
     """Read and validate meta/info.json (given the file or the dataset folder)."""
     path = Path(path)
@@ -416,7 +473,7 @@ def load_info(path: str | Path) -> DatasetInfo:
             version.split(".")[0] != major):
         raise VtsError(f"format_version {version!r} is not one this vtsbench reads "
                        f"({major}.x); use a matching vtsbench", path)
-    errs = schema_errors(doc, "dataset_info")
+    errs = info_schema_errors(doc)
     if errs:
         more = f" (and {len(errs) - 1} more)" if len(errs) > 1 else ""
         raise VtsError(f"{errs[0]}{more}", path)

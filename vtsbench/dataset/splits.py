@@ -173,13 +173,17 @@ def unseen_objects_split(samples: Iterable[SampleMeta], *, seed: int = 0, k: int
             else:
                 by_state.setdefault(s.state, []).append(s.sample_id)
     present = [st for st in STATES if st in by_state]
-    if not present:
+    unlabelled = not all_states  # no slip sample has a state: nothing to balance
+    if not present and not unlabelled:
         raise VtsError(f"{name}: no sample of the held-out objects {held} has a known state")
-    m = min(len(by_state[st]) for st in present)
-    test = []
-    for st in present:
-        ids = by_state[st]
-        test += [ids[i] for i in sorted(rng.choice(len(ids), size=m, replace=False))]
+    if unlabelled:
+        m, test = None, [s.sample_id for s in slip if s.object in held]
+    else:
+        m = min(len(by_state[st]) for st in present)
+        test = []
+        for st in present:
+            ids = by_state[st]
+            test += [ids[i] for i in sorted(rng.choice(len(ids), size=m, replace=False))]
     seen_ids = [s.sample_id for s in slip if s.object not in held]
     val = _take(seen_ids, val_fraction, rng)
     train = sorted(set(seen_ids) - set(val))
@@ -187,10 +191,14 @@ def unseen_objects_split(samples: Iterable[SampleMeta], *, seed: int = 0, k: int
               "seen_objects": [o for o in objects if o not in held],
               "val_fraction": val_fraction, "test_per_state": m, "test_states": present,
               "missing_states": [st for st in STATES if st in all_states and st not in present],
-              "dropped_for_balance": {st: len(by_state[st]) - m for st in present},
-              "dropped_unknown_state": unknown}
-    desc = (f"{k} of {n} objects held out as test, {m} samples per state ({', '.join(present)}); "
-            "train and val from the other objects")
+              "dropped_for_balance": {st: len(by_state[st]) - (m or 0) for st in present},
+              "dropped_unknown_state": 0 if unlabelled else unknown}
+    if unlabelled:
+        params["states_unknown"] = True
+    desc = (f"{k} of {n} objects held out as test, "
+            + (f"{m} samples per state ({', '.join(present)})" if not unlabelled else
+               "all their samples (no sample has a state: not balanced)")
+            + "; train and val from the other objects")
     return SplitFile(name, "slip", desc, seed, _parts(train=train, val=val, test=test),
                      ["object:test"], params)
 

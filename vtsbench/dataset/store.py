@@ -23,6 +23,8 @@ import numpy as np
 from ..errors import VtsError
 
 ARRAYS = ("rgb", "depth", "contact")
+#: The arrays of a dataset built without depth (`vtsbench build --no-depth`).
+RGB_ONLY = ("rgb",)
 KINDS = ("static", "slip")
 DTYPES = {"rgb": "uint8", "depth": "int16", "contact": "bool"}
 #: Depth is stored as int16 counts of this many mm: +-32.767 mm in 1 um steps.
@@ -66,6 +68,7 @@ class Layout:
     frames: int | None  # T for slip, None for static
     samples_per_shard: int
     level: int  # zstd level; 0 stores the chunks uncompressed
+    arrays: tuple[str, ...] = ARRAYS  # RGB_ONLY for a dataset without depth
 
     def sample_shape(self, name: str) -> tuple[int, ...]:
         lead = (self.frames,) if self.frames else ()
@@ -90,7 +93,8 @@ class Layout:
 
     def to_dict(self) -> dict[str, Any]:
         return {"n": self.n, "frame": list(self.frame), "frames": self.frames,
-                "samples_per_shard": self.samples_per_shard, "level": self.level}
+                "samples_per_shard": self.samples_per_shard, "level": self.level,
+                "arrays": list(self.arrays)}
 
 
 def _codecs(level: int) -> list[Any]:
@@ -100,13 +104,14 @@ def _codecs(level: int) -> list[Any]:
 
 
 def _create(store: Any, layout: Layout, n: int,
-            names: tuple[str, ...] = ARRAYS) -> dict[str, Any]:
-    """Create the group and its arrays with n rows on a zarr store; returns the arrays."""
+            names: tuple[str, ...] | None = None) -> dict[str, Any]:
+    """Create the group and its arrays (default: the layout's) with n rows on a zarr store;
+    returns the arrays."""
     import zarr
 
     group = zarr.create_group(store, attributes=_group_attrs(layout), overwrite=True)
     out = {}
-    for name in names:
+    for name in layout.arrays if names is None else names:
         sample = layout.sample_shape(name)
         out[name] = group.create_array(
             name, shape=(n, *sample), dtype=DTYPES[name], chunks=(1, *sample),
@@ -178,12 +183,13 @@ def encode_shard(layout: Layout, name: str, block: np.ndarray) -> bytes:
 
 def write_shard(group_dir: Path, layout: Layout, k: int, blocks: dict[str, np.ndarray],
                 digests: dict[str, str] | None = None) -> dict[str, int]:
-    """Encode and write shard k of every array; returns each file's size in bytes, and puts
-    the sha256 of each file's bytes into `digests` when given (no need to read them back)."""
+    """Encode and write shard k of every array of the layout; returns each file's size in bytes,
+    and puts the sha256 of each file's bytes into `digests` when given (no need to read them
+    back)."""
     import hashlib
 
     sizes = {}
-    for name in ARRAYS:
+    for name in layout.arrays:
         data = encode_shard(layout, name, blocks[name])
         path = group_dir / layout.shard_key(name, k)
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -2,7 +2,8 @@
 
 Counts per object (static samples and slip samples per state), per slip direction and per
 split part, sizes on disk per folder against the raw size (uint8 RGB + float32 depth), and
-the versions and checksum that identify the dataset. Reads no array data.
+the versions and checksum that identify the dataset (a dataset built with --no-depth: uint8
+RGB alone). Reads no array data.
 """
 
 from __future__ import annotations
@@ -50,8 +51,7 @@ def summarise(root: str | Path) -> Summary:
             sizes[top] = sizes.get(top, 0) + p.stat().st_size
     raw = 0
     for shapes in info.shapes.values():
-        n_rgb = _prod(shapes["rgb"])
-        raw += n_rgb + 4 * _prod(shapes["depth"])
+        raw += _prod(shapes["rgb"]) + (4 * _prod(shapes["depth"]) if "depth" in shapes else 0)
     return Summary(info, by_object, dict(sorted(sizes.items())), raw)
 
 
@@ -77,11 +77,13 @@ def render(s: Summary, console: Any) -> None:
 
     info = s.info
     cal = info.calibration
+    depth = (f"calibration {cal.sensor + ' / ' + cal.method if cal else 'none'}, solver "
+             f"{info.build.get('solver', '?')}" if info.has_depth
+             else "rgb only: no depth or contact (built with --no-depth)")
     console.print(f"[bold]{info.name}[/] {info.dataset_version} (format {info.format_version}, "
                   f"vtsbench {info.vtsbench_version}); {info.resolution[0]}x"
-                  f"{info.resolution[1]} frames, T = {info.frames_per_sequence}; calibration "
-                  f"{cal.sensor + ' / ' + cal.method if cal else 'none'}, solver "
-                  f"{info.build.get('solver', '?')}", highlight=False)
+                  f"{info.resolution[1]} frames, T = {info.frames_per_sequence}; {depth}",
+                  highlight=False)
     console.print(f"dataset_sha256 {info.dataset_sha256}", highlight=False)
     t = Table(title="samples per object", title_justify="left")
     cols = ["static", *(f"slip:{x}" for x in STATES)]
@@ -120,6 +122,7 @@ def render(s: Summary, console: Any) -> None:
     sz.add_row("[bold]total[/]", f"[bold]{human(total)}[/]")
     data = sum(v for k, v in s.sizes.items() if k.startswith("data/"))
     if s.raw_bytes:
-        sz.add_row("raw arrays (uint8 RGB + float32 depth)",
+        sz.add_row("raw arrays (uint8 RGB + float32 depth)" if info.has_depth
+                   else "raw arrays (uint8 RGB)",
                    f"{human(s.raw_bytes)} (data/ is {data / s.raw_bytes:.0%} of it)")
     console.print(sz)

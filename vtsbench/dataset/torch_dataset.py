@@ -88,6 +88,11 @@ class TorchView(Dataset):
         t = view.dataset.info.frames_per_sequence
         self.frames = None if frames is None else frame_numbers(t, int(frames))
         inputs = {"rgb": ("rgb",), "depth": ("depth",), "rgbd": ("rgb", "depth")}[modality]
+        from .loader import check_arrays
+
+        check_arrays(view.dataset.info, inputs, f"modality {modality!r}")
+        for name in self.targets:
+            check_arrays(view.dataset.info, (name,), f"target {name!r}")
         self.arrays = tuple(dict.fromkeys(inputs + self.targets))
 
     def __len__(self) -> int:

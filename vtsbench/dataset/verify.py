@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import VtsError
 from .schema import INFO_PATH, KINDS, Counts, DatasetInfo, SampleMeta, dataset_checksum, load_info
-from .store import ARRAYS, DTYPES, Layout
+from .store import DTYPES, Layout
 
 #: An inner chunk missing from a shard has offset and length 2**64 - 1 in the shard index.
 MISSING = 2**64 - 1
@@ -189,7 +189,7 @@ def check_arrays(root: Path, info: DatasetInfo, index: dict[str, list[SampleMeta
             continue
         ids = [m.sample_id for m in index.get(kind, [])]
         sps = info.zarr.samples_per_shard.get(kind, 1)
-        for name in ARRAYS:
+        for name in info.arrays:
             try:
                 arr = group[name]
             except KeyError:
@@ -209,9 +209,9 @@ def check_arrays(root: Path, info: DatasetInfo, index: dict[str, list[SampleMeta
             report.problems += [f"{where}/{name}: {b}" for b in bad]
             if bad or not decode:
                 continue
-            frames = arr.shape[2] if kind == "slip" and len(arr.shape) > 2 else None
+            frames = arr.shape[1] if kind == "slip" and len(arr.shape) > 2 else None
             lay = Layout(kind, arr.shape[0], tuple(want[-2:] if name != "rgb" else want[-3:-1]),
-                         frames, sps, info.zarr.level)
+                         frames, sps, info.zarr.level, info.arrays)
             for k in range(lay.n_shards):
                 report.problems += _decode_shard(root / where, lay, name, k, arr, ids)
                 report.shards += 1
@@ -268,7 +268,7 @@ def verify(root: str | Path, *, decode: bool = True, progress: bool = False) -> 
         if bar is not None:
             sps = info.zarr.samples_per_shard
             n_shards = sum(-(-s.get("rgb", (0,))[0] // max(1, sps.get(k, 1)))
-                           for k, s in info.shapes.items()) * len(ARRAYS) if decode else 0
+                           for k, s in info.shapes.items()) * len(info.arrays) if decode else 0
             t = bar.add_task("checking", total=len(info.files) + n_shards)
             advance = lambda n: bar.advance(t, n)  # noqa: E731
         check_files(root, info, report, advance)
