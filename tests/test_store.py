@@ -16,6 +16,7 @@ from vtsbench.dataset.store import (
     depth_to_int16,
     depth_to_mm,
     encode_shard,
+    encode_shard_zarr,
     open_group,
     samples_per_shard,
     write_metadata,
@@ -84,6 +85,20 @@ def test_encoding_is_deterministic_and_checks_the_block() -> None:
         encode_shard(lay, "rgb", block[:, :, :4])
     with pytest.raises(ValueError, match="shard block"):
         encode_shard(lay, "rgb", np.concatenate([block, block]))
+
+
+@pytest.mark.parametrize("level", [0, 1, 3])
+@pytest.mark.parametrize(("kind", "frames", "sps"), [("static", None, 4), ("slip", 3, 2),
+                                                     ("slip", 1, 1)])
+def test_shards_are_the_bytes_zarr_writes(level: int, kind: str, frames: int | None,
+                                          sps: int) -> None:
+    lay = Layout(kind, 5, (6, 8), frames, sps, level)
+    data = _data(lay, seed=level)
+    data["depth"][-1] = 0  # a chunk of fill values is still written
+    for name in ARRAYS:
+        for rows in {1, sps}:  # a full shard and a partial last one
+            block = data[name][:rows]
+            assert encode_shard(lay, name, block) == encode_shard_zarr(lay, name, block)
 
 
 def test_missing_group_is_one_line(tmp_path: Path) -> None:
