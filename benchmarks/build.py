@@ -12,8 +12,8 @@ has calibration.safetensors. Then:
    the shard phase alone (best of --repeats), the ratio of the two, and the CPU time per frame
    of the whole build (this process and its workers), with the CPU other processes used
    meanwhile (from /proc/stat: a shared machine shows in it);
-2. times each stage of a shard task per frame in one process (decode, depth, contact mask,
-   int16, encode and write);
+2. times each stage of a shard task per frame in one process, as in a worker (decode, depth,
+   contact mask, int16, encode and write), CPU time;
 3. re-encodes the built arrays with zstd levels 1, 3 and 9 and without compression: bytes on
    disk against raw (uint8 RGB + float32 depth), write speed (encode + write whole shards) and
    read speed (every sample through zarr), in frames/s, best of 2.
@@ -116,13 +116,15 @@ def timed_build(rec: Path, out: Path, workers: int, repeats: int) -> dict[str, f
     return best
 
 
-def stage_times(rec: Path, n_sequences: int = 4) -> dict[str, float]:
-    """CPU ms per frame of each stage of a shard task, in this process with one OpenCV thread:
-    decode, depth (colour difference, lut, dct), contact mask, int16, encode (zarr, zstd; CPU
-    time, so zarr's codec threads count in full)."""
+def stage_times(rec: Path, work: Path, n_sequences: int = 24) -> dict[str, float]:
+    """CPU ms per frame of each stage of a shard task, in this process as in a worker (one
+    OpenCV thread, malloc keeping freed memory): decode, depth (colour difference, lut, dct),
+    contact mask, int16, and encode + write (zstd, crc32c, sha256, files), for shards of four
+    8-frame sequences at level 3; each stage's best shard (the machine is shared). The first
+    shard warms up (imports, caches, FFT plans)."""
     import cv2
 
-    from vtsbench.dataset.store import depth_to_int16, encode_shard
+    from vtsbench.dataset.store import depth_to_int16, write_shard
     from vtsbench.depth.calibration import load_calibration
     from vtsbench.recordings.manifest import load_manifest
     from vtsbench.recordings.media import read_frames
@@ -130,38 +132,44 @@ def stage_times(rec: Path, n_sequences: int = 4) -> dict[str, float]:
     cv2.setNumThreads(1)
     cal = load_calibration(rec / "calibration.safetensors")
     mk = build_mod._maker(cal)
-    seqs = [e for e in load_manifest(rec).entries if e.kind == "sequence"][:n_sequences + 1]
-    t = dict.fromkeys(("decode", "depth", "contact", "int16", "encode"), 0.0)
-    frames = 0
-    lay = Layout("slip", 1, cal.resolution, 8, 1, 3)
-    for n, e in enumerate(seqs):  # the first one warms up (imports, caches, FFT plans)
-        if n == 1:
-            t = dict.fromkeys(t, 0.0)
-            frames = 0
-        t0 = time.process_time()
-        x = read_frames(rec / e.source.path, e.source.start or 0, e.source.stop)[:8]
-        t1 = time.process_time()
-        depth = np.empty(x.shape[:-1], np.float32)
-        contact = np.empty(x.shape[:-1], bool)
-        for i, f in enumerate(x):
-            t1a = time.process_time()
-            diff = mk.difference(f)
-            depth[i] = mk.integrate(mk.gradients(diff), "dct")
-            t2 = time.process_time()
-            contact[i] = mk.contact(diff)
-            t3 = time.process_time()
-            t["depth"] += t2 - t1a
-            t["contact"] += t3 - t2
-        t3 = time.process_time()
-        d16 = depth_to_int16(depth)
-        t4 = time.process_time()
-        for name, block in (("rgb", x), ("depth", d16), ("contact", contact)):
-            encode_shard(lay, name, block[None])
-        t5 = time.process_time()
-        for k, a, b in (("decode", t0, t1), ("int16", t3, t4), ("encode", t4, t5)):
-            t[k] += b - a
-        frames += len(x)
-    return {k: v / frames * 1000 for k, v in t.items()}
+    seqs = [e for e in load_manifest(rec).entries if e.kind == "sequence"][:n_sequences + 4]
+    names = ("decode", "depth", "contact", "int16", "encode + write")
+    best = dict.fromkeys(names, float("inf"))
+    lay = Layout("slip", len(seqs), cal.resolution, 8, 4, 3)
+    group = work / "stages"
+    with build_mod._malloc_keeps_memory():
+        for n in range(0, len(seqs) - 3, 4):
+            t = dict.fromkeys(names, 0.0)
+            t0 = time.process_time()
+            rgb = np.stack([read_frames(rec / e.source.path, e.source.start or 0,
+                                        e.source.stop)[:8] for e in seqs[n:n + 4]])
+            t1 = time.process_time()
+            depth = np.empty(rgb.shape[:-1], np.int16)
+            contact = np.empty(rgb.shape[:-1], bool)
+            for i in range(4):
+                for f in range(8):
+                    ta = time.process_time()
+                    diff = mk.difference(rgb[i, f])
+                    z = mk.integrate(mk.gradients(diff), "dct")
+                    tb = time.process_time()
+                    contact[i, f] = mk.contact(diff)
+                    tc = time.process_time()
+                    depth_to_int16(z, out=depth[i, f], scratch=True)
+                    td = time.process_time()
+                    t["depth"] += tb - ta
+                    t["contact"] += tc - tb
+                    t["int16"] += td - tc
+            t4 = time.process_time()
+            write_shard(group, lay, n // 4, {"rgb": rgb, "depth": depth, "contact": contact},
+                        {})  # new files, as in a build (replacing one costs more here)
+            t5 = time.process_time()
+            t["decode"] += t1 - t0
+            t["encode + write"] += t5 - t4
+            if n:  # the first shard warms up
+                frames = rgb.shape[0] * rgb.shape[1]
+                best = {k: min(best[k], t[k] / frames * 1000) for k in names}
+    shutil.rmtree(group, ignore_errors=True)
+    return best
 
 
 def storage(ds: Path, work: Path, levels: list[int]) -> list[dict[str, float]]:
@@ -227,7 +235,7 @@ def main() -> None:
             print(f"simulated and calibrated in {time.perf_counter() - t0:.1f} s",
                   file=sys.stderr)
         runs = {w: timed_build(rec, work / f"ds{w}", w, args.repeats) for w in (1, 2)}
-        stages = stage_times(rec)
+        stages = stage_times(rec, work)
         rows = storage(work / "ds1", work, [0, 1, 3, 9])
         report(runs, stages, rows, size)  # type: ignore[arg-type]
     finally:

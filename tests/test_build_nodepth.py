@@ -120,3 +120,32 @@ def test_unknown_scale_and_no_labels(sim_recordings: Path, tmp_path: Path) -> No
     report = json.loads((out / "meta" / "build_report.json").read_text())
     assert "unseen_objects" not in report["splits_skipped"]
     assert "scale unknown" in (out / "README.md").read_text()
+
+
+def test_no_depth_resumes_a_partial_rgbd_build(sim_recordings: Path, tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    from test_build_helpers import SHARD_MB
+
+    from vtsbench.dataset import build as build_mod
+    from vtsbench.dataset.build import BuildOptions, build, partial_path
+
+    out = tmp_path / "ds"
+    real, calls = build_mod.run_shard, []
+
+    def stop(task):
+        calls.append(task)
+        if len(calls) > 3:
+            raise KeyboardInterrupt
+        return real(task)
+
+    with monkeypatch.context() as m:
+        m.setattr(build_mod, "run_shard", stop)
+        with pytest.raises(KeyboardInterrupt):
+            build(sim_recordings, out, BuildOptions(shard_mb=SHARD_MB))
+    assert (partial_path(out) / "data" / "static.zarr" / "depth").is_dir()
+    res = build(sim_recordings, out, BuildOptions(shard_mb=SHARD_MB, depth=False))
+    assert res.shards_kept == 0  # other arrays, other bytes: every shard again
+    for kind in ("static", "slip"):
+        names = {p.name for p in (out / "data" / f"{kind}.zarr").iterdir() if p.is_dir()}
+        assert names == {"rgb"}
+    assert CliRunner().invoke(app, ["verify", str(out)]).exit_code == 0
