@@ -119,13 +119,8 @@ class ResnetRecipe(Recipe):
             logits = net(_normalize(x.to(dev), modality, scale))
             return torch.nn.functional.cross_entropy(logits, target["class_idx"].long().to(dev))
 
-        cfg = TrainConfig(
-            steps=int(config["steps"]), batch_size=int(config["batch_size"]),
-            lr=float(config["lr"]), weight_decay=float(config["weight_decay"]),
-            warmup_steps=int(config["warmup_steps"]), schedule=config["schedule"],
-            grad_clip=config["grad_clip"], checkpoint_every=int(config["checkpoint_every"]),
-            amp=bool(config["amp"]),
-            extra={"recipe": self.name, "recipe_config": json.dumps(config), "split": split,
+        cfg = TrainConfig.from_recipe(
+            config, {"recipe": self.name, "recipe_config": json.dumps(config), "split": split,
                    "objects": json.dumps(objects)})
         res = train_loop(model, loss_fn, data, out_dir, cfg, seed=seed, device=device,
                          resume=resume, progress=progress)

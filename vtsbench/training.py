@@ -47,6 +47,16 @@ class TrainConfig:
     amp: bool = True  # mixed precision, on CUDA only
     extra: dict[str, Any] = field(default_factory=dict)  # written into the checkpoint metadata
 
+    @classmethod
+    def from_recipe(cls, config: dict[str, Any], extra: dict[str, Any]) -> TrainConfig:
+        """The loop options held in a torch recipe's config under the same names."""
+        return cls(steps=int(config["steps"]), batch_size=int(config["batch_size"]),
+                   lr=float(config["lr"]), weight_decay=float(config["weight_decay"]),
+                   warmup_steps=int(config["warmup_steps"]), schedule=config["schedule"],
+                   grad_clip=config["grad_clip"],
+                   checkpoint_every=int(config["checkpoint_every"]), amp=bool(config["amp"]),
+                   extra=extra)
+
 
 @dataclass
 class TrainResult:
