@@ -147,3 +147,22 @@ def test_digit_presses_with_circles(tmp_path) -> None:
     save_manifest(tmp_path, m)
     rep = check_folder(tmp_path)
     assert rep.ok and any("no background" in w for w in rep.warnings)
+
+
+def test_window_leaves_out_short_clips_with_a_warning(tmp_path, capsys) -> None:
+    write_video(tmp_path / "egg_0.avi", 10)
+    write_video(tmp_path / "egg_1.avi", 5)  # shorter than the window: left out, not an error
+    write_video(tmp_path / "cup_0.avi", 8)
+    said: list[str] = []
+    m = build_pattern_manifest(tmp_path, ManifestOptions("{object}_{take:d}.avi", window=8),
+                               warn=said.append)
+    assert [e.id for e in m.entries] == ["cup_0-w000", "egg_0-w000"]
+    assert said == ["egg_1.avi: 5 frames, fewer than --window 8: left out",
+                    "left out 1 of 3 matched files, shorter than --window 8"]
+    res = CliRunner().invoke(app, ["manifest", str(tmp_path), "--pattern",
+                                   "{object}_{take:d}.avi", "--window", "8"])
+    assert res.exit_code == 0, res.output
+    assert "egg_1.avi: 5 frames" in res.output and "wrote" in res.output
+    assert len(load_manifest(tmp_path).entries) == 2
+    with pytest.raises(VtsError, match="every matched file is shorter"):
+        build_pattern_manifest(tmp_path, ManifestOptions("egg_1.avi", window=8))

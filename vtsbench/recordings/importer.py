@@ -5,6 +5,8 @@ from __future__ import annotations
 import csv
 import os
 import re
+import sys
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -133,9 +135,18 @@ def _circle_for(circles: dict[str, Circle], rel: str, used: set[str]) -> Circle 
     return None
 
 
-def build_pattern_manifest(folder: Path, opts: ManifestOptions) -> Manifest:
-    """A manifest for the files under folder that match opts.pattern (files stay in place)."""
+def _stderr_warning(msg: str) -> None:
+    print(f"warning: {msg}", file=sys.stderr)
+
+
+def build_pattern_manifest(folder: Path, opts: ManifestOptions,
+                           warn: Callable[[str], None] | None = None) -> Manifest:
+    """A manifest for the files under folder that match opts.pattern (files stay in place).
+
+    With --window, a video or image folder shorter than the window makes no sequence: it is
+    left out with a warning (`warn`, one line each, then the count), not an error."""
     folder = Path(folder)
+    say = warn or (lambda _msg: None)
     if not folder.is_dir():
         raise VtsError("not a folder", folder)
     if opts.kind not in (None, "static", "sequence", "press"):
@@ -157,6 +168,7 @@ def build_pattern_manifest(folder: Path, opts: ManifestOptions) -> Manifest:
     used: set[str] = set()
     stride = opts.stride or opts.window
     entries: list[Entry] = []
+    short: list[str] = []
     session_probe: dict[str, tuple[int, int, float | None]] = {}
     for rel, fields in matches:
         path = folder / rel
@@ -164,6 +176,10 @@ def build_pattern_manifest(folder: Path, opts: ManifestOptions) -> Manifest:
         kind = opts.kind or ("static" if pr.kind == "image" else "sequence")
         if kind == "sequence" and pr.kind == "image":
             raise VtsError("a sequence needs a video or an image folder", path)
+        if kind == "sequence" and opts.window and pr.n_frames < opts.window:
+            short.append(rel)
+            say(f"{rel}: {pr.n_frames} frames, fewer than --window {opts.window}: left out")
+            continue
         ses = fields.get("session", opts.session)
         if ses not in session_probe:
             session_probe[ses] = (pr.height, pr.width, _video_fps(path) if pr.kind == "video"
@@ -180,13 +196,16 @@ def build_pattern_manifest(folder: Path, opts: ManifestOptions) -> Manifest:
         elif kind == "static" and pr.kind != "image":
             base = replace(base, source=Source(src, frame=0))
         if kind == "sequence" and opts.window:
-            if pr.n_frames < opts.window:
-                raise VtsError(f"{pr.n_frames} frames, fewer than --window {opts.window}", path)
             for k, s in enumerate(range(0, pr.n_frames - opts.window + 1, stride)):
                 entries.append(replace(base, id=f"{base.id}-w{k:03d}",
                                        source=Source(src, start=s, stop=s + opts.window)))
         else:
             entries.append(base)
+    if short:
+        say(f"left out {len(short)} of {len(matches)} matched files, shorter than --window "
+            f"{opts.window}")
+        if not entries:
+            raise VtsError(f"every matched file is shorter than --window {opts.window}", folder)
     unused = sorted(set(circles) - used)
     if unused:
         raise VtsError(f"{len(unused)} circle row(s) match no file of the pattern, first "
@@ -218,15 +237,17 @@ def _video_fps(path: Path) -> float | None:
     return round(float(fps), 6) if fps and fps > 0 else None
 
 
-def write_pattern_manifest(folder: Path, opts: ManifestOptions) -> tuple[Manifest, Path]:
+def write_pattern_manifest(folder: Path, opts: ManifestOptions,
+                           warn: Callable[[str], None] | None = _stderr_warning
+                           ) -> tuple[Manifest, Path]:
     """Build and write recordings.json (in opts.out or the folder); refuses to replace one
-    unless opts.force."""
+    unless opts.force. Warnings (files left out) go to `warn`: stderr by default."""
     home = Path(opts.out) if opts.out is not None else Path(folder)
     home.mkdir(parents=True, exist_ok=True)
     target = home / MANIFEST_NAME
     if target.exists() and not opts.force:
         raise VtsError("already exists (use --force to replace it)", target)
-    m = build_pattern_manifest(Path(folder), opts)
+    m = build_pattern_manifest(Path(folder), opts, warn)
     return m, save_manifest(home, m)
 
 
