@@ -110,6 +110,24 @@ def test_unknown_scale_and_no_labels(sim_recordings: Path, tmp_path: Path) -> No
     ds = vtsbench.load(out)
     sample = ds.slip[0]
     assert sample["mm_per_px"] is None and sample["state"] is None
+    # what the loader gives fits the sample schema and its typed mirror
+    from vtsbench.dataset.schema import Sample as SampleSpec
+    from vtsbench.dataset.schema import SampleMeta, schema_errors
+
+    for kind in ("static", "slip"):
+        s = ds.view(kind)[0]
+        assert "depth" not in s and "contact" not in s
+        doc = {k: list(v) if isinstance(v, tuple) else v for k, v in s.items() if k != "rgb"}
+        doc["rgb"] = {"dtype": str(s["rgb"].dtype), "shape": list(s["rgb"].shape)}
+        assert schema_errors(json.loads(json.dumps(doc)), "sample") == [], kind
+        row = ds.view(kind).index.to_pylist()[0]
+        assert schema_errors({**row, "kind": kind, **({} if kind == "slip" else dict.fromkeys(
+            ("state", "state_idx", "direction", "motion_dx_mm", "motion_dy_mm")))},
+            "sample", "index_row") == []
+        spec = SampleSpec.from_meta(SampleMeta.from_row(row, kind), ds.info.resolution,
+                                    ds.info.frames_per_sequence if kind == "slip" else None,
+                                    arrays=ds.info.arrays)
+        assert spec.to_dict() == doc
     # unlabelled: unseen_objects holds out whole objects without balancing states
     split = ds.split_file("unseen_objects")
     assert split.params["states_unknown"] is True

@@ -79,7 +79,8 @@ def test_state_idx_is_filled_and_checked() -> None:
     (lambda d: d.update(state="press", state_idx=1), "direction"),
     (lambda d: d.update(state_idx=0), "state"),
     (lambda d: d.update(direction=8), "direction"),
-    (lambda d: d.update(mm_per_px_x=None), "mm_per_px_x"),
+    (lambda d: d.update(mm_per_px_x=0.0), "mm_per_px_x"),
+    (lambda d: d.update(mm_per_px_x=None), "mm_per_px_y"),  # both known, or neither
     (lambda d: d.update(colour="red"), "colour"),
 ])
 def test_index_row_schema_rejects(mutate, needle) -> None:
@@ -137,6 +138,28 @@ def test_sample_description_rules() -> None:
     d = ds.Sample.from_meta(slip_meta(), (240, 320), 8).to_dict()
     del d["depth"]["unit"]
     assert any("unit" in e for e in ds.schema_errors(d, "sample"))
+
+
+@pytest.mark.parametrize("scale", [None, 0.0634])
+def test_rgb_only_sample_description(scale) -> None:
+    """A sample of a dataset built with --no-depth: rgb alone; the scale may be unknown."""
+    meta = slip_meta(mm_per_px_x=scale, mm_per_px_y=scale)
+    assert ds.schema_errors(meta.to_dict(), "sample", "index_row") == []
+    s = ds.Sample.from_meta(meta, (240, 320), 8, arrays=ds.RGB_ONLY)
+    d = s.to_dict()
+    assert "depth" not in d and "contact" not in d
+    assert d["mm_per_px"] == (None if scale is None else [scale, scale])
+    assert ds.schema_errors(d, "sample") == []
+    assert ds.Sample.from_dict(json.loads(json.dumps(d))) == s
+    full = ds.Sample.from_meta(meta, (240, 320), 8).to_dict()
+    if scale is None:  # depth comes with a scale (the calibration's)
+        assert any("mm_per_px" in e for e in ds.schema_errors(full, "sample"))
+    else:
+        assert ds.schema_errors(full, "sample") == []
+    half = {k: v for k, v in full.items() if k != "contact"}  # depth and contact go together
+    assert any("contact" in e for e in ds.schema_errors(half, "sample"))
+    with pytest.raises(ValueError, match="arrays"):
+        ds.Sample.from_meta(meta, (240, 320), 8, arrays=("rgb", "depth"))
 
 
 def make_info() -> ds.DatasetInfo:

@@ -198,7 +198,10 @@ class ArraySpec:
 
 @dataclass(frozen=True)
 class Sample:
-    """What a loaded sample holds, arrays described by ArraySpec (schemas/sample.schema.json)."""
+    """What a loaded sample holds, arrays described by ArraySpec (schemas/sample.schema.json).
+
+    A sample of a dataset built without depth (RGB_ONLY) has no depth and no contact (None
+    here, absent from to_dict), and mm_per_px is None when its session gives no scale."""
 
     sample_id: str
     kind: str
@@ -206,10 +209,10 @@ class Sample:
     class_idx: int
     session: str
     sensor: str
-    mm_per_px: tuple[float, float]
+    mm_per_px: tuple[float, float] | None
     rgb: ArraySpec
-    depth: ArraySpec
-    contact: ArraySpec
+    depth: ArraySpec | None
+    contact: ArraySpec | None
     source: str
     press_depth_mm: float | None = None
     contact_px: tuple[float, float] | None = None
@@ -220,25 +223,34 @@ class Sample:
 
     @classmethod
     def from_meta(cls, m: SampleMeta, resolution: tuple[int, int], frames: int | None = None,
-                  depth_dtype: str = DEPTH_DTYPE,
-                  depth_scale_mm: float = DEPTH_SCALE_MM) -> Sample:
-        """The description of index row m as stored: frames (T) is required for slip samples."""
+                  depth_dtype: str = DEPTH_DTYPE, depth_scale_mm: float = DEPTH_SCALE_MM,
+                  arrays: tuple[str, ...] = ARRAYS) -> Sample:
+        """The description of index row m as stored: frames (T) is required for slip samples;
+        arrays: the dataset's (info.arrays), RGB_ONLY for a build without depth."""
         if m.kind == "slip" and not frames:
             raise ValueError("a slip sample needs frames (T)")
+        if tuple(arrays) not in (ARRAYS, RGB_ONLY):
+            raise ValueError(f"arrays must be {ARRAYS} or {RGB_ONLY}, got {tuple(arrays)}")
+        depth = tuple(arrays) == ARRAYS
         lead = (frames,) if m.kind == "slip" else ()
         hw = (*lead, int(resolution[0]), int(resolution[1]))
         xy = (m.contact_x_px, m.contact_y_px)
         dxy = (m.motion_dx_mm, m.motion_dy_mm)
+        scale = (m.mm_per_px_x, m.mm_per_px_y)
         return cls(m.sample_id, m.kind, m.object, m.class_idx, m.session, m.sensor,
-                   (m.mm_per_px_x, m.mm_per_px_y), ArraySpec("uint8", (*hw, 3)),
-                   ArraySpec(depth_dtype, hw, "mm", depth_scale_mm), ArraySpec("bool", hw),
+                   None if None in scale else _pair(scale), ArraySpec("uint8", (*hw, 3)),
+                   ArraySpec(depth_dtype, hw, "mm", depth_scale_mm) if depth else None,
+                   ArraySpec("bool", hw) if depth else None,
                    m.source, m.press_depth_mm, None if None in xy else _pair(xy), m.state,
                    m.state_idx, m.direction, None if None in dxy else _pair(dxy))
 
     def to_dict(self) -> dict[str, Any]:
+        """The schema's document: depth and contact absent (not null) without depth."""
         d: dict[str, Any] = {}
         for k in self.__dataclass_fields__:
             v = getattr(self, k)
+            if v is None and k in ("depth", "contact"):
+                continue
             d[k] = v.to_dict() if isinstance(v, ArraySpec) else list(v) if isinstance(
                 v, tuple) else v
         return d
@@ -247,7 +259,7 @@ class Sample:
     def from_dict(cls, d: Mapping[str, Any]) -> Sample:
         args = {k: d.get(k) for k in cls.__dataclass_fields__}
         for k in ("rgb", "depth", "contact"):
-            args[k] = ArraySpec.from_dict(d[k])
+            args[k] = None if d.get(k) is None and k != "rgb" else ArraySpec.from_dict(d[k])
         for k in ("mm_per_px", "contact_px", "motion_mm"):
             args[k] = _pair(args[k])
         return cls(**args)
