@@ -1,6 +1,6 @@
 """Build throughput and storage: frames/s of `vtsbench build`, and bytes on disk per compression.
 
-Run: .venv/bin/python benchmarks/build.py [--static 40] [--sequences 40] [--size 480x640]
+Run: .venv/bin/python benchmarks/build.py [--static 120] [--sequences 120] [--size 480x640]
                                           [--recordings DIR] [--repeats 2] [--keep]
 
 Simulates recordings (static frames, 8-frame sequences and 20 calibration presses) in a
@@ -9,11 +9,13 @@ has calibration.safetensors. Then:
 
 1. builds the dataset with 1 and 2 worker processes (lut + dct, zstd level 3): frames/s end to
    end (checking the recordings, planning, shards, index, splits, preview, checksums) and of
-   the shard phase alone (best of --repeats), the ratio of the two, and the CPU time per frame
-   of the whole build (this process and its workers), with the CPU other processes used
-   meanwhile (from /proc/stat: a shared machine shows in it);
+   the shard phase alone (best of --repeats), the seconds before and after the shard phase
+   (the fixed costs), the ratio of the two worker counts, and the CPU time per frame of the
+   whole build (this process and its workers), with the CPU other processes used meanwhile
+   (from /proc/stat: a shared machine shows in it);
 2. times each stage of a shard task per frame in one process, as in a worker (decode, depth,
-   contact mask, int16, encode and write), CPU time;
+   contact mask, int16, encode and write), CPU time, and the parts of encoding a shard (zstd
+   at levels 0, 1 and 3, crc32c, sha256);
 3. re-encodes the built arrays with zstd levels 1, 3 and 9 and without compression: bytes on
    disk against raw (uint8 RGB + float32 depth), write speed (encode + write whole shards) and
    read speed (every sample through zarr), in frames/s, best of 2.
@@ -87,12 +89,14 @@ def _busy_seconds() -> float:
 
 
 def timed_build(rec: Path, out: Path, workers: int, repeats: int) -> dict[str, float]:
-    """Best of `repeats` builds: total seconds, seconds in the shard phase, CPU seconds, frames."""
-    phase = {"shards": 0.0}
+    """Best of `repeats` builds: total seconds, seconds in the shard phase and before it, CPU
+    seconds, frames."""
+    phase = {"shards": 0.0, "start": 0.0}
     real = build_mod._run
 
     def run(*args: Any, **kwargs: Any) -> Any:
         t0 = time.perf_counter()
+        phase["start"] = phase["start"] or t0
         try:
             return real(*args, **kwargs)
         finally:
@@ -102,15 +106,17 @@ def timed_build(rec: Path, out: Path, workers: int, repeats: int) -> dict[str, f
     build_mod._run = run
     try:
         for _ in range(repeats):
-            phase["shards"] = 0.0
+            phase["shards"] = phase["start"] = 0.0
             shutil.rmtree(out, ignore_errors=True)  # a fresh build: deleting is not its work
             b0, c0, t0 = _busy_seconds(), _cpu_seconds(), time.perf_counter()
             res = build(rec, out, BuildOptions(workers=workers))
             total, cpu = time.perf_counter() - t0, _cpu_seconds() - c0
             others = max(0.0, _busy_seconds() - b0 - cpu) / total
             if not best or total < best["total"]:
+                before = phase["start"] - t0
                 best = {"total": total, "shards": phase["shards"], "cpu": cpu,
-                        "frames": sum(res.frames.values()), "others": others}
+                        "frames": sum(res.frames.values()), "others": others,
+                        "before": before, "after": total - before - phase["shards"]}
     finally:
         build_mod._run = real
     return best
@@ -141,8 +147,12 @@ def stage_times(rec: Path, work: Path, n_sequences: int = 24) -> dict[str, float
         for n in range(0, len(seqs) - 3, 4):
             t = dict.fromkeys(names, 0.0)
             t0 = time.process_time()
-            rgb = np.stack([read_frames(rec / e.source.path, e.source.start or 0,
-                                        e.source.stop)[:8] for e in seqs[n:n + 4]])
+            rgb = np.empty((4, 8, *cal.resolution, 3), np.uint8)
+            for i, e in enumerate(seqs[n:n + 4]):  # as run_shard: into the shard's rows
+                x = _read_into(read_frames, rec / e.source.path, e.source.start or 0,
+                               (e.source.start or 0) + 8, rgb[i])
+                if x is not rgb[i]:
+                    rgb[i] = x
             t1 = time.process_time()
             depth = np.empty(rgb.shape[:-1], np.int16)
             contact = np.empty(rgb.shape[:-1], bool)
@@ -170,6 +180,53 @@ def stage_times(rec: Path, work: Path, n_sequences: int = 24) -> dict[str, float
                 best = {k: min(best[k], t[k] / frames * 1000) for k in names}
     shutil.rmtree(group, ignore_errors=True)
     return best
+
+
+def _read_into(read_frames: Any, path: Path, start: int, stop: int, out: np.ndarray) -> Any:
+    """read_frames into out where it takes out= (this code), else as the code before it."""
+    try:
+        return read_frames(path, start, stop, out=out)
+    except TypeError:
+        return read_frames(path, start, stop)
+
+
+def encode_parts(ds: Path) -> dict[str, float]:
+    """CPU ms per frame of the parts of encoding a slip shard (rgb, depth, contact): zstd at
+    levels 0 (none), 1 and 3, and the crc32c and sha256 of the level-3 bytes; best of 5."""
+    import hashlib
+
+    import google_crc32c
+    from numcodecs import Zstd
+
+    g = open_group(ds, "slip")
+    sps = g["rgb"].shards[0]
+    blocks = {n: g[n][:sps] for n in ARRAYS}
+    frames = blocks["rgb"].shape[0] * blocks["rgb"].shape[1]
+    out: dict[str, float] = {}
+
+    def best(fn: Any) -> float:
+        b = float("inf")
+        for _ in range(5):
+            t0 = time.process_time()
+            fn()
+            b = min(b, time.process_time() - t0)
+        return b / frames * 1000
+
+    chunks = {}
+    for level in (0, 1, 3):
+        z = Zstd(level=level) if level else None
+
+        def enc(z: Any = z) -> list[bytes]:
+            return [z.encode(np.ascontiguousarray(c)) if z else c.tobytes()
+                    for n in ARRAYS for c in blocks[n]]
+
+        out[f"zstd {level}" if level else "no compression"] = best(enc)
+        chunks[level] = enc()
+    data = chunks[3]
+    out["crc32c"] = best(lambda: [google_crc32c.value(c) for c in data])
+    joined = b"".join(data)
+    out["sha256"] = best(lambda: hashlib.sha256(joined).hexdigest())
+    return out
 
 
 def storage(ds: Path, work: Path, levels: list[int]) -> list[dict[str, float]]:
@@ -216,8 +273,10 @@ def storage(ds: Path, work: Path, levels: list[int]) -> list[dict[str, float]]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--static", type=int, default=40)
-    ap.add_argument("--sequences", type=int, default=40)
+    # 1,080 frames: enough that the fixed costs (imports, checking, finishing; about 2 s of CPU)
+    # weigh little, as at the paper's scale (83,000 frames)
+    ap.add_argument("--static", type=int, default=120)
+    ap.add_argument("--sequences", type=int, default=120)
     ap.add_argument("--size", default="480x640")
     ap.add_argument("--recordings", type=Path, default=None,
                     help="use this recordings folder (with calibration.safetensors)")
@@ -236,8 +295,9 @@ def main() -> None:
                   file=sys.stderr)
         runs = {w: timed_build(rec, work / f"ds{w}", w, args.repeats) for w in (1, 2)}
         stages = stage_times(rec, work)
+        parts = encode_parts(work / "ds1")
         rows = storage(work / "ds1", work, [0, 1, 3, 9])
-        report(runs, stages, rows, size)  # type: ignore[arg-type]
+        report(runs, stages, parts, rows, size)  # type: ignore[arg-type]
     finally:
         if args.keep:
             print(f"kept {work}", file=sys.stderr)
@@ -246,18 +306,20 @@ def main() -> None:
 
 
 def report(runs: dict[int, dict[str, float]], stages: dict[str, float],
-           rows: list[dict[str, float]], size: tuple[int, int]) -> None:
+           parts: dict[str, float], rows: list[dict[str, float]],
+           size: tuple[int, int]) -> None:
     """Markdown tables."""
     h, w = size
     n = int(runs[1]["frames"])
     print(f"### Build throughput ({h}x{w}, {n} frames, lut + dct, zstd level 3)\n")
     print("| workers | end to end (s) | frames/s end to end | shard phase (s) "
-          "| frames/s in the shard phase | CPU ms per frame | other processes (cores) |")
-    print("|---:|---:|---:|---:|---:|---:|---:|")
+          "| frames/s in the shard phase | before / after the shards (s) | CPU ms per frame "
+          "| other processes (cores) |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|")
     for k, r in runs.items():
         print(f"| {k} | {r['total']:.1f} | {r['frames'] / r['total']:.1f} | {r['shards']:.1f} "
-              f"| {r['frames'] / r['shards']:.1f} | {r['cpu'] / r['frames'] * 1000:.0f} "
-              f"| {r['others']:.2f} |")
+              f"| {r['frames'] / r['shards']:.1f} | {r['before']:.2f} / {r['after']:.2f} "
+              f"| {r['cpu'] / r['frames'] * 1000:.1f} | {r['others']:.2f} |")
     print(f"\n2 workers / 1 worker: {runs[1]['total'] / runs[2]['total']:.2f}x end to end, "
           f"{runs[1]['shards'] / runs[2]['shards']:.2f}x in the shard phase.\n")
     print("### Per frame, one process (ms)\n")
@@ -265,6 +327,10 @@ def report(runs: dict[int, dict[str, float]], stages: dict[str, float],
     print("|" + "---:|" * (len(stages) + 1))
     print("| " + " | ".join(f"{v:.1f}" for v in stages.values())
           + f" | {sum(stages.values()):.1f} |")
+    print("\n### Encoding a slip shard, per frame (CPU ms; rgb + depth + contact)\n")
+    print("| " + " | ".join(parts) + " |")
+    print("|" + "---:|" * len(parts))
+    print("| " + " | ".join(f"{v:.2f}" for v in parts.values()) + " |")
     print("\n### Storage (bytes against raw uint8 RGB + float32 depth)\n")
     print("| compression | on disk (MB) | raw (MB) | on disk / raw | write (frames/s) "
           "| read (frames/s) |")

@@ -55,6 +55,26 @@ def test_clean_mask_matches_scipy_morphology() -> None:
     assert np.array_equal(clean_mask(batch), scipy_clean_mask(batch, 3, 20, 2))
 
 
+def test_clean_mask_of_a_box_equals_the_frame() -> None:
+    """clean_mask cleans the raw pixels' bounding box grown by its reach: contacts in the middle,
+    touching each border and each corner, with rings (holes) and specks, as scipy.ndimage
+    cleans the whole frame."""
+    rng = np.random.default_rng(3)
+    h, w = 90, 120
+    yy, xx = np.mgrid[:h, :w]
+    for cy, cx in ((45, 60), (0, 60), (89, 60), (45, 0), (45, 119), (0, 0), (89, 119), (3, 115)):
+        r = np.hypot(yy - cy, xx - cx)
+        raw = (r < 9) & ~((r > 4) & (r < 5.5))  # a disc with a ring-shaped gap
+        raw |= (r > 12) & (r < 14) & (rng.random((h, w)) < 0.8)  # a broken ring around it
+        raw |= rng.random((h, w)) < 0.002  # specks anywhere
+        for close_px, min_area_px, dilate_px in ((3, 20, 2), (0, 0, 0), (5, 1, 4)):
+            got = clean_mask(raw, close_px=close_px, min_area_px=min_area_px,
+                             dilate_px=dilate_px)
+            want = scipy_clean_mask(raw, close_px, min_area_px, dilate_px)
+            assert np.array_equal(got, want), (cy, cx, close_px)
+    assert not clean_mask(np.zeros((2, h, w), bool)).any()
+
+
 def test_depth_maker_equals_reconstruct(sim_recordings: Path) -> None:
     from vtsbench.depth.calibration import load_calibration
     from vtsbench.depth.reconstruct import reconstruct

@@ -54,6 +54,7 @@ class DepthMaker:
         self.diff = np.empty((h, w, 3), np.float32)
         # the divergence's parts; `b` then holds the transforms and the depth, in place
         self.ax, self.ay, self.b = (np.empty((h, w), np.float32) for _ in range(3))
+        self.p, self.q = np.empty((h, w), np.float32), np.empty((h, w), np.float32)
         self.lut: dict[str, Any] | None = None
         m = cal.mapping
         if isinstance(m, LutMapping):
@@ -105,7 +106,9 @@ class DepthMaker:
         import cv2
 
         cal, d = self.cal, self.diff
-        np.subtract(rgb, self.bg, out=d, dtype=np.float32)
+        # the same float32 values as np.subtract(rgb, bg, dtype=np.float32) (uint8 -> float32 is
+        # exact), without numpy's buffered casting of mixed types: 0.30 -> 0.23 ms
+        cv2.subtract(rgb, self.bg, dst=d, dtype=cv2.CV_32F)
         if cal.blur_px > 0:
             cv2.GaussianBlur(d, (0, 0), cal.blur_px, dst=d, borderType=cv2.BORDER_REFLECT_101)
         np.clip(d, -cal.colour_limit_dn, cal.colour_limit_dn, out=d)
@@ -127,6 +130,7 @@ class DepthMaker:
         float32: "dct" and "dst" with the same operations in the same order, in place (the
         result is overwritten by the next call) and on one FFT thread; "masked" through
         integrate itself (mask: the contact)."""
+        import cv2
         import scipy.fft
 
         if solver == "masked":
@@ -135,7 +139,9 @@ class DepthMaker:
             return integrate(g[..., 0], g[..., 1], method="masked", mask=mask,
                              mm_per_px=self.cal.mm_per_px, dtype=np.float32)
         dct = solver == "dct"
-        p, q = g[..., 0], g[..., 1]
+        # p and q apart (contiguous): the arithmetic on them is then about twice as fast as on
+        # the interleaved views, for 0.06 ms of splitting
+        p, q = cv2.split(g, [self.p, self.q])
         hx, hy = np.float32(self.hx), np.float32(self.hy)
         ax, ay, b = self.ax, self.ay, self.b
         # staggered(p, q, "point"), then divergence(gx, gy, hx, hy, "neumann" or "dirichlet")

@@ -32,8 +32,6 @@ import math
 
 import numpy as np
 import scipy.fft
-import scipy.sparse
-import scipy.sparse.linalg
 
 from vtsbench.errors import VtsError
 
@@ -242,6 +240,9 @@ def _solve_masked_frame(b: np.ndarray, mask: np.ndarray, hx: float, hy: float) -
         rows += [i0, i1]
         cols += [i1, i0]
         vals += [np.full(i0.size, w), np.full(i0.size, w)]
+    import scipy.sparse  # here: about 50 ms to import, and only the masked solver needs it
+    import scipy.sparse.linalg
+
     mat = scipy.sparse.csc_matrix(
         (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
     lu = scipy.sparse.linalg.splu(mat, permc_spec="NATURAL", diag_pivot_thresh=0.0,

@@ -37,8 +37,13 @@ class _Media:
     bad_frames: dict[int, str] = field(default_factory=dict)
 
 
-def check_folder(folder: str | Path, deep: bool = False, workers: int = 2) -> CheckReport:
-    """Check a recordings folder: schema, references, media, frame ranges, sizes and labels."""
+def check_folder(folder: str | Path, deep: bool = False, workers: int = 2,
+                 decode: bool = True) -> CheckReport:
+    """Check a recordings folder: schema, references, media, frame ranges, sizes and labels.
+
+    decode=False (what `vtsbench build` screens with): PNG frames are sized from their headers
+    instead of decoded, since the build decodes them anyway and reports a frame that does not
+    decode; other images and the video frames are decoded as without it."""
     folder = Path(folder)
     report = CheckReport()
     try:
@@ -53,7 +58,7 @@ def check_folder(folder: str | Path, deep: bool = False, workers: int = 2) -> Ch
     m = Manifest.from_dict(doc)
     report.n_entries = len(m.entries)
     _check_ids(m, report)
-    media = _open_media(folder, m, deep, workers)
+    media = _open_media(folder, m, deep, workers, decode)
     _check_sessions(folder, m, media, report)
     for e in m.entries:
         _check_entry(folder, m, e, media, report)
@@ -85,7 +90,8 @@ def _frames_needed(m: Manifest) -> dict[str, set[int]]:
     return need
 
 
-def _open_media(folder: Path, m: Manifest, deep: bool, workers: int) -> dict[str, _Media]:
+def _open_media(folder: Path, m: Manifest, deep: bool, workers: int,
+                decode: bool = True) -> dict[str, _Media]:
     """Probe every referenced source once (in threads: OpenCV releases the GIL)."""
     need = _frames_needed(m)
 
@@ -93,7 +99,7 @@ def _open_media(folder: Path, m: Manifest, deep: bool, workers: int) -> dict[str
         path = folder / rel
         out = _Media()
         try:
-            out.probe = probe(path)
+            out.probe = probe(path, decode)
         except VtsError as e:
             out.error = str(e).removeprefix(f"{path}: ")
             return rel, out
