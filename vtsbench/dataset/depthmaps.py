@@ -51,6 +51,8 @@ class DepthMaker:
         self.inv = inverse_eigenvalues("dct", h, w, f32, self.hx, self.hy)
         self.inv_dst = inverse_eigenvalues("dst", h, w, f32, self.hx, self.hy)
         self.border = border_mask(h, w)
+        # its pixels' flat indices, in the order boolean indexing takes them (0.17 -> 0.03 ms)
+        self.border_idx = np.flatnonzero(self.border)
         self.diff = np.empty((h, w, 3), np.float32)
         # the divergence's parts; `b` then holds the transforms and the depth, in place
         self.ax, self.ay, self.b = (np.empty((h, w), np.float32) for _ in range(3))
@@ -168,7 +170,7 @@ class DepthMaker:
         s = scipy.fft.dctn(b, type=2, norm="ortho", workers=1, overwrite_x=True)
         s *= self.inv
         z = scipy.fft.idctn(s, type=2, norm="ortho", workers=1, overwrite_x=True)
-        z -= np.median(z[self.border])  # the border pixels' median at 0 depth
+        z -= np.median(np.take(z, self.border_idx))  # the border pixels' median at 0 depth
         return z
 
     def depth(self, rgb: np.ndarray, solver: str = "dct") -> np.ndarray:
@@ -186,8 +188,11 @@ class DepthMaker:
 
         p = CONTACT_PARAMS
         sq = cv2.multiply(diff, diff)  # squares, exact as numpy's: 0.1 ms against 1.4 (einsum)
-        d2 = np.add(sq[..., 0], sq[..., 1])
-        d2 += sq[..., 2]
+        # (r + g) + b, each a float32 addition as numpy's on the interleaved channels, on the
+        # split channels: 0.2 ms less
+        r, g, b = cv2.split(sq)
+        d2 = cv2.add(r, g)
+        d2 = cv2.add(d2, b, dst=d2)
         raw = d2 > np.float32((p["threshold"] * 255.0) ** 2)
         return clean_mask(raw, close_px=p["close_px"], min_area_px=p["min_area_px"],
                           dilate_px=p["dilate_px"])
