@@ -5,8 +5,10 @@ BIN    := $(VENV)/bin
 DEMO   ?= demo-data
 SEED   ?= 0
 WORKERS ?= 2
+STATIC ?= 300
+SEQUENCES ?= 360
 
-.PHONY: demo test lint bench clean
+.PHONY: demo results test lint bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -15,14 +17,15 @@ $(VENV)/.installed: pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --disable-pip-version-check -q -e '.[dev,torch]'
 	touch $@
 
-## demo: the main job on the synthetic sensor: simulate -> check -> calibrate -> build -> verify -> load
+## demo: the main job on the synthetic sensor: simulate -> check -> calibrate -> build -> verify ->
+## load -> train the small baselines -> predict -> eval -> leaderboard (about 12 min on 2 CPU cores)
 demo: $(VENV)/.installed
-	$(BIN)/vtsbench simulate $(DEMO)/recordings --seed $(SEED) --static 30 --sequences 30 \
-		--presses 20 --workers $(WORKERS) --overwrite
+	$(BIN)/vtsbench simulate $(DEMO)/recordings --seed $(SEED) --static $(STATIC) \
+		--sequences $(SEQUENCES) --presses 20 --workers $(WORKERS) --overwrite --quiet
 	$(BIN)/vtsbench check $(DEMO)/recordings
 	$(BIN)/vtsbench preview $(DEMO)/recordings --out $(DEMO)/preview.png
 	$(BIN)/vtsbench calibrate $(DEMO)/recordings --out $(DEMO)/recordings/calibration.safetensors \
-		--method poly --holdout 4
+		--method lut --holdout 4
 	$(BIN)/vtsbench build $(DEMO)/recordings $(DEMO)/dataset --workers $(WORKERS) --overwrite
 	$(BIN)/vtsbench verify $(DEMO)/dataset
 	$(BIN)/vtsbench info $(DEMO)/dataset
@@ -30,7 +33,22 @@ demo: $(VENV)/.installed
 		test = ds.split('unseen_objects', 'test'); s = test[0]; \
 		print(f'loaded {len(ds.static)} static and {len(ds.slip)} slip samples; unseen_objects/test: {len(test)} sequences;', \
 		s['sample_id'], s['rgb'].shape, s['depth'].shape, f\"max depth {s['depth'].max():.3f} mm\")"
-	@echo "demo done: recordings in $(DEMO)/recordings (contact sheet $(DEMO)/preview.png), calibration report in $(DEMO)/recordings/calibration.safetensors.report/, dataset in $(DEMO)/dataset"
+	$(BIN)/python benchmarks/results.py --dataset $(DEMO)/dataset --runs $(DEMO)/runs \
+		--leaderboards $(DEMO)/leaderboards --out $(DEMO)/results.md --retrain
+	@echo "demo done: recordings in $(DEMO)/recordings (contact sheet $(DEMO)/preview.png), calibration report in $(DEMO)/recordings/calibration.safetensors.report/, dataset in $(DEMO)/dataset, runs in $(DEMO)/runs, leaderboards in $(DEMO)/leaderboards, results table in $(DEMO)/results.md"
+
+## results: the published figures: the demo's dataset -> docs/results.md and leaderboards/;
+## with OCTOPI=folder of the octopi GelSight Mini videos, also ResNet on that real data
+results: $(VENV)/.installed
+	test -f $(DEMO)/dataset/meta/info.json || $(MAKE) demo
+	$(if $(OCTOPI),test -f $(DEMO)/octopi-dataset/meta/info.json || ( \
+		$(BIN)/vtsbench manifest $(OCTOPI) --pattern '{object}_{session:d}.mov' --kind static \
+			--stride 20 --sensor gelsight-mini --out $(DEMO)/octopi --force && \
+		$(BIN)/vtsbench build $(DEMO)/octopi $(DEMO)/octopi-dataset --no-depth \
+			--workers $(WORKERS) --overwrite ))
+	$(BIN)/python benchmarks/results.py --dataset $(DEMO)/dataset --runs $(DEMO)/runs \
+		--leaderboards leaderboards --out docs/results.md \
+		$(if $(OCTOPI),--octopi $(DEMO)/octopi-dataset)
 
 ## test: install the dev extras and run the test suite on both cores
 test: $(VENV)/.installed

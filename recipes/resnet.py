@@ -58,6 +58,7 @@ class ResnetRecipe(Recipe):
 
     def default_config(self) -> dict[str, Any]:
         return {
+            "arch": "resnet50",         # resnet50 (the paper's) | resnet18 (CPU-sized)
             "modality": "rgb",          # rgb | depth
             "image_size": 224,          # square input side
             "pretrained_path": None,    # torchvision ImageNet state dict (.pth/.safetensors)
@@ -84,7 +85,8 @@ class ResnetRecipe(Recipe):
 
         if config["modality"] not in MODALITIES:
             raise VtsError(f"modality must be one of {MODALITIES}, not {config['modality']!r}")
-        return static_resnet(num_classes, config["modality"], pretrained_path)
+        return static_resnet(num_classes, config["modality"], pretrained_path,
+                             config.get("arch", "resnet50"))
 
     @staticmethod
     def _data(view: Any, config: dict[str, Any]) -> Any:

@@ -60,3 +60,12 @@ def test_label_motion_states_and_thresholds() -> None:
 def test_non_finite_angle_is_an_error() -> None:
     with pytest.raises(ValueError):
         angle_to_class(float("nan"))
+
+
+@pytest.mark.parametrize("angle", [0.0, 10.0, 44.0, 67.0, 100.0, 135.0, 200.0, 290.0, 359.0])
+def test_mirror_tables_follow_the_mirrored_angle(angle: float) -> None:
+    from vtsbench.labels import MIRROR_X, MIRROR_Y
+
+    k = angle_to_class(angle)
+    assert MIRROR_X[k] == angle_to_class((180.0 - angle) % 360.0)
+    assert MIRROR_Y[k] == angle_to_class((-angle) % 360.0)

@@ -198,3 +198,38 @@ def test_augment_leaves_depth_values_unjittered():
     out = augment(rgbd, "rgbd", torch.Generator().manual_seed(0), max_rotation=0.0)
     assert torch.allclose(out[:, 3], depth[:, 0])
     assert not torch.allclose(out[:, :3], rgbd[:, :3])  # colour is jittered
+
+
+def test_flip_augment_mirrors_frames_and_maps_directions() -> None:
+    from vtsbench.labels import MIRROR_X, MIRROR_Y
+    from vtsbench.models.timesformer import flip_augment
+
+    x = torch.arange(16 * 2 * 1 * 3 * 4, dtype=torch.float32).view(16, 2, 1, 3, 4)
+    d = torch.tensor([0, 1, 2, 3, 4, 5, 6, 7, -1, -1, 0, 1, 2, 3, 4, 5])
+    y, e = flip_augment(x, d, torch.Generator().manual_seed(0))
+    y2, e2 = flip_augment(x, d, torch.Generator().manual_seed(0))
+    assert torch.equal(y, y2) and torch.equal(e, e2)  # deterministic given the generator
+    seen = set()
+    for i in range(16):
+        variants = {(fx, fy): x[i].flip(-1) if fx else x[i] for fx in (0, 1) for fy in (0, 1)}
+        variants = {key: v.flip(-2) if key[1] else v for key, v in variants.items()}
+        (fx, fy), = [key for key, v in variants.items() if torch.equal(y[i], v)]
+        seen.add((fx, fy))
+        k = int(d[i])
+        if k < 0:
+            assert int(e[i]) == k
+            continue
+        if fx:
+            k = MIRROR_X[k]
+        if fy:
+            k = MIRROR_Y[k]
+        assert int(e[i]) == k
+    assert len(seen) > 1  # both flipped and unflipped samples occur
+
+
+def test_resnet18_arch_and_unknown_arch() -> None:
+    m = static_resnet(5, "rgb", arch="resnet18")
+    assert m(torch.zeros(1, 3, 64, 64)).shape == (1, 5)
+    assert sum(p.numel() for p in m.parameters()) < 12_000_000
+    with pytest.raises(VtsError, match="arch"):
+        static_resnet(5, "rgb", arch="vgg")

@@ -5,6 +5,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
+from vtsbench.errors import VtsError
 from vtsbench.recipes import load_recipe
 
 pytest_plugins = ["loader_conftest"]
@@ -58,3 +61,20 @@ def test_timesformer_rows_for_every_sample(vts_dataset: Path, tmp_path: Path) ->
     assert [r["sample_id"] for r in rows if r["task"] == "state"] == list(ids)
     assert [r["sample_id"] for r in rows if r["task"] == "direction"] == list(ids)
     assert all(0 <= r["pred"] < 8 for r in rows if r["task"] == "direction")
+
+
+def test_delta_input_and_input_modes() -> None:
+    import torch
+
+    from recipes.timesformer import _normalize, input_mode
+
+    x = torch.rand(2, 4, 3, 8, 8)
+    small = {"config": "small", "modality": "rgb", "depth_scale_mm": 1.0, "input": None,
+             "delta_gain": 4.0}
+    assert input_mode(small) == "delta" and input_mode({**small, "config": "paper"}) == "frames"
+    d = _normalize(x, small)
+    assert torch.equal(d[:, 0], torch.zeros_like(d[:, 0]))  # the first frame minus itself
+    assert torch.allclose(d, ((x - x[:, :1]) * 8).clamp(-1, 1), atol=1e-6)
+    assert torch.equal(_normalize(x, {**small, "input": "frames"}), (x - 0.5) / 0.5)
+    with pytest.raises(VtsError, match="input"):
+        input_mode({**small, "input": "optical"})

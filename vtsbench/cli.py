@@ -141,7 +141,9 @@ def manifest(
              "y|center_y, r|radius in pixels.")] = None,
     window: Annotated[int | None, typer.Option(
         min=1, help="Cut videos and folders into sequences of this many frames.")] = None,
-    stride: Annotated[int | None, typer.Option(min=1, help="Step between windows.")] = None,
+    stride: Annotated[int | None, typer.Option(
+        min=1, help="Step between windows; with --kind static, a static frame every STRIDE "
+                    "frames of each video or image folder (else its first frame).")] = None,
     force: Annotated[bool, typer.Option(help="Replace an existing recordings.json.")] = False,
     out: Annotated[Path | None, typer.Option(
         help="Write recordings.json into this folder instead (for read-only data); paths in it "

@@ -50,6 +50,13 @@ def class_center_deg(k: int) -> float:
     return (k % N_DIRECTIONS) * BIN_DEG
 
 
+#: Direction class after mirroring the image left-right (angle a -> 180 - a) and up-down
+#: (a -> -a). Exact for every angle inside a bin; a motion exactly on a bin edge (22.5 deg)
+#: would land in the neighbouring bin, a set of measure zero.
+MIRROR_X: tuple[int, ...] = tuple((4 - k) % N_DIRECTIONS for k in range(N_DIRECTIONS))
+MIRROR_Y: tuple[int, ...] = tuple((-k) % N_DIRECTIONS for k in range(N_DIRECTIONS))
+
+
 @dataclass(frozen=True)
 class Thresholds:
     """Window-level thresholds (mm) separating static, press and slip."""

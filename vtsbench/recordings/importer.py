@@ -199,6 +199,11 @@ def build_pattern_manifest(folder: Path, opts: ManifestOptions,
             for k, s in enumerate(range(0, pr.n_frames - opts.window + 1, stride)):
                 entries.append(replace(base, id=f"{base.id}-w{k:03d}",
                                        source=Source(src, start=s, stop=s + opts.window)))
+        elif kind == "static" and pr.kind != "image" and opts.stride:
+            # a static frame every --stride frames of a video or image folder
+            for f in range(0, pr.n_frames, opts.stride):
+                entries.append(replace(base, id=f"{base.id}-f{f:05d}",
+                                       source=Source(src, frame=f)))
         else:
             entries.append(base)
     if short:
