@@ -47,7 +47,7 @@ results: $(VENV)/.installed
 		$(BIN)/vtsbench build $(DEMO)/octopi $(DEMO)/octopi-dataset --no-depth \
 			--workers $(WORKERS) --overwrite ))
 	$(BIN)/python benchmarks/results.py --dataset $(DEMO)/dataset --runs $(DEMO)/runs \
-		--leaderboards leaderboards --out docs/results.md \
+		--leaderboards leaderboards --out docs/results.md --profile results \
 		$(if $(OCTOPI),--octopi $(DEMO)/octopi-dataset)
 
 ## test: install the dev extras and run the test suite on both cores
