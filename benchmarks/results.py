@@ -105,11 +105,13 @@ def run_one(run: Run, ds: Path, runs_dir: Path, boards: Path, retrain: bool,
     """Train, predict, eval and leaderboard-add one run; its figures."""
     name = f"{run.dataset}-{run.method}-{run.split}"
     out = runs_dir / name
-    if retrain and out.exists():
+    cfg = out / "config-override.json"
+    text = json.dumps(run.config, indent=1) + "\n"
+    stale = cfg.exists() and cfg.read_text() != text  # trained with another config
+    if (retrain or stale) and out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True, exist_ok=True)
-    cfg = out / "config-override.json"
-    cfg.write_text(json.dumps(run.config, indent=1) + "\n")
+    cfg.write_text(text)
     train_args = ["train", run.recipe, "--dataset", str(ds), "--split", run.split,
                   "--out", str(out), "--quiet"]
     if run.config:
