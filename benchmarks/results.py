@@ -86,7 +86,7 @@ def profile_runs(profile: str, octopi: bool) -> list[Run]:
     return runs
 
 
-def vtsbench(*args: str, log: list[str]) -> float:
+def run_cli(*args: str, log: list[str]) -> float:
     """Run one `vtsbench` command (echoed, and kept for the page); its wall time in seconds."""
     exe = Path(sys.executable).with_name("vtsbench")
     cmd = [str(exe) if exe.exists() else "vtsbench", *args]
@@ -117,13 +117,13 @@ def run_one(run: Run, ds: Path, runs_dir: Path, boards: Path, retrain: bool,
     if run.config:
         train_args += ["--config", str(cfg)]
     done = (out / "checkpoint.safetensors").exists()
-    train_s = vtsbench(*train_args, log=log)
+    train_s = run_cli(*train_args, log=log)
     if not done:
         (out / "train_seconds.txt").write_text(f"{train_s:.1f}\n")
     sub = runs_dir / f"{name}.csv"
-    vtsbench("predict", run.recipe, str(out / "checkpoint.safetensors"), "--dataset", str(ds),
+    run_cli("predict", run.recipe, str(out / "checkpoint.safetensors"), "--dataset", str(ds),
              "--split", run.split, "--out", str(sub), "--method", run.method, log=log)
-    vtsbench("eval", str(sub), "--dataset", str(ds), "--split", run.split,
+    run_cli("eval", str(sub), "--dataset", str(ds), "--split", run.split,
              "--out", str(runs_dir / f"{name}.eval"), log=log)
     meta = json.loads(sub.with_suffix(".meta.json").read_text())
     metrics = json.loads((runs_dir / f"{name}.eval" / "metrics.json").read_text())
@@ -131,7 +131,7 @@ def run_one(run: Run, ds: Path, runs_dir: Path, boards: Path, retrain: bool,
     board = boards / metrics["dataset"]["name"] / run.split
     for old in board.glob(f"{run.method}-*.json"):
         old.unlink()
-    vtsbench("leaderboard", "add", str(sub), "--dataset", str(ds), "--split", run.split,
+    run_cli("leaderboard", "add", str(sub), "--dataset", str(ds), "--split", run.split,
              "--root", str(boards), log=log)
     tasks = metrics["tasks"]
 
@@ -369,7 +369,7 @@ def main() -> None:
             parameters(run, n_obj)
         r["classes"] = n_obj
         rows.append(r)
-    vtsbench("leaderboard", "render", "--root", str(args.leaderboards), log=log)
+    run_cli("leaderboard", "render", "--root", str(args.leaderboards), log=log)
     devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
     paper_rows = []
     for dev in devices:
