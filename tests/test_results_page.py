@@ -37,10 +37,14 @@ def test_profiles_and_findings() -> None:
                  n_dir=37, latency_ms=4.0),
             _row(mod, "timesformer-small-rgb", "timesformer", "unseen_objects", state=95.5,
                  direction=20.0, n_dir=37, latency_ms=20.0, params=1_900_000)]
-    text = " ".join(mod.findings(rows))
+    text = " ".join(mod.findings(rows, []))
     assert "does not beat" in text and "5.0x faster" in text and "46.0 %" in text
+    rows[1].update(n_slip_train=75, n_train=216)
+    assert "75 slipping sequences (of 216" in " ".join(mod.findings(rows, []))
+    paper = [{"kind": "slip", "device": "cpu", "latency_ms": 2000.0}]
+    assert "500x faster" in " ".join(mod.findings(rows, paper))
     rows[1]["direction"] = 50.0
-    assert "TimeSformer beats" in " ".join(mod.findings(rows))
+    assert "TimeSformer beats" in " ".join(mod.findings(rows, []))
 
 
 def test_page_has_both_tables_and_paper_rows() -> None:
