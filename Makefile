@@ -18,7 +18,7 @@ $(VENV)/.installed: pyproject.toml | $(BIN)/python
 	touch $@
 
 ## demo: the main job on the synthetic sensor: simulate -> check -> calibrate -> build -> verify ->
-## load -> train the small baselines -> predict -> eval -> leaderboard (about 12 min on 2 CPU cores)
+## load -> train the small baselines -> predict -> eval -> leaderboard (11 min on 2 CPU cores)
 demo: $(VENV)/.installed
 	$(BIN)/vtsbench simulate $(DEMO)/recordings --seed $(SEED) --static $(STATIC) \
 		--sequences $(SEQUENCES) --presses 20 --workers $(WORKERS) --overwrite --quiet

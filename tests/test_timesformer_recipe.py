@@ -78,3 +78,10 @@ def test_delta_input_and_input_modes() -> None:
     assert torch.equal(_normalize(x, {**small, "input": "frames"}), (x - 0.5) / 0.5)
     with pytest.raises(VtsError, match="input"):
         input_mode({**small, "input": "optical"})
+
+
+def test_slip_oversample_must_be_positive(vts_dataset: Path, tmp_path: Path) -> None:
+    rec = load_recipe(RECIPE)
+    config = {**rec.default_config(), **TINY, "slip_oversample": 0}
+    with pytest.raises(VtsError, match="slip_oversample"):
+        rec.train(vts_dataset, "unseen_objects", tmp_path, config, progress=False)
