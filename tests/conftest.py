@@ -18,6 +18,9 @@ from vtsbench.recordings.manifest import (
 )
 from vtsbench.recordings.media import write_png
 
+# the shared dataset fixtures and helpers, imported by test modules: rewrite their asserts
+pytest.register_assert_rewrite("loader_conftest")
+
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
 
 

@@ -132,3 +132,27 @@ def http_root(vts_dataset: Path) -> Iterator[str]:
     """The base URL of a loopback server whose /ds is the test dataset."""
     with serve(vts_dataset.parent) as base:
         yield f"{base}/{vts_dataset.name}"
+
+
+def predict_and_eval(recipe: str, checkpoint: Path, dataset: Path, split: str,
+                     work: Path, name: str) -> dict:
+    """`vtsbench predict` then `vtsbench eval --out` through the CLI, as a user runs them;
+    checks the submission's metadata (method = recipe name, a measured latency) and returns
+    the eval's metrics.json."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from vtsbench.cli import app
+
+    runner = CliRunner()
+    sub = work / f"{name}.csv"
+    res = runner.invoke(app, ["predict", recipe, str(checkpoint), "--dataset", str(dataset),
+                              "--split", split, "--out", str(sub)])
+    assert res.exit_code == 0, res.output
+    meta = json.loads((work / f"{name}.meta.json").read_text())
+    assert meta["method"] == Path(recipe).stem and meta["latency_ms_per_sample_median"] > 0
+    res = runner.invoke(app, ["eval", str(sub), "--dataset", str(dataset), "--split", split,
+                              "--out", str(work / "ev"), "--no-figures"])
+    assert res.exit_code == 0, res.output
+    return json.loads((work / "ev" / "metrics.json").read_text())

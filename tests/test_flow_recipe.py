@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from loader_conftest import predict_and_eval
 
 from vtsbench.labels import angle_to_class
 from vtsbench.recipes import load_recipe
@@ -63,16 +64,7 @@ def test_flow_cli_end_to_end(vts_dataset: Path, tmp_path: Path) -> None:
         thresholds = fh.get_tensor("tree.threshold")
     assert meta["recipe"] == "flow" and json.loads(meta["config"])["preset"] == "fast"
     assert np.isfinite(thresholds).all()
-    sub = tmp_path / "flow.csv"
-    res = runner.invoke(app, ["predict", str(FLOW), str(ckpt), "--dataset", str(vts_dataset),
-                              "--split", "unseen_objects", "--out", str(sub)])
-    assert res.exit_code == 0, res.output
-    meta = json.loads((tmp_path / "flow.meta.json").read_text())
-    assert meta["method"] == "flow" and meta["latency_ms_per_sample_median"] > 0
-    res = runner.invoke(app, ["eval", str(sub), "--dataset", str(vts_dataset), "--split",
-                              "unseen_objects", "--out", str(tmp_path / "ev"), "--no-figures"])
-    assert res.exit_code == 0, res.output
-    doc = json.loads((tmp_path / "ev" / "metrics.json").read_text())
+    doc = predict_and_eval(str(FLOW), ckpt, vts_dataset, "unseen_objects", tmp_path, "flow")
     assert set(doc["tasks"]) == {"state", "direction"}
 
 

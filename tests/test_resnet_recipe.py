@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from loader_conftest import predict_and_eval
+
 from vtsbench.recipes import load_recipe
 
 pytest_plugins = ["loader_conftest"]
@@ -35,16 +37,7 @@ def test_resnet_cli_train_predict_eval(vts_dataset: Path, tmp_path: Path) -> Non
     pngs = sorted((out / "gradcam").glob("*.png"))
     assert len(pngs) == min(2, len(test_ids)) > 0
     assert Image.open(pngs[0]).size == (32, 32)
-    sub = tmp_path / "resnet.csv"
-    res = runner.invoke(app, ["predict", "resnet", str(ckpt), "--dataset", str(vts_dataset),
-                              "--split", SPLIT, "--out", str(sub)])
-    assert res.exit_code == 0, res.output
-    meta = json.loads((tmp_path / "resnet.meta.json").read_text())
-    assert meta["method"] == "resnet" and meta["latency_ms_per_sample_median"] > 0
-    res = runner.invoke(app, ["eval", str(sub), "--dataset", str(vts_dataset), "--split",
-                              SPLIT, "--out", str(tmp_path / "ev"), "--no-figures"])
-    assert res.exit_code == 0, res.output
-    doc = json.loads((tmp_path / "ev" / "metrics.json").read_text())
+    doc = predict_and_eval("resnet", ckpt, vts_dataset, SPLIT, tmp_path, "resnet")
     assert set(doc["tasks"]) == {"object"}
 
 

@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
+from loader_conftest import predict_and_eval
 
 from vtsbench.errors import VtsError
 from vtsbench.recipes import load_recipe
@@ -37,16 +38,7 @@ def test_timesformer_cli_train_predict_eval(vts_dataset: Path, tmp_path: Path) -
         assert fh.get_tensor("model.state_head.weight").shape[0] == 3
     assert meta["recipe"] == "timesformer" and meta["step"] == "3"
     assert json.loads(meta["recipe_config"])["modality"] == "rgbd"
-    sub = tmp_path / "tsf.csv"
-    res = runner.invoke(app, ["predict", "timesformer", str(ckpt), "--dataset",
-                              str(vts_dataset), "--split", "unseen_objects", "--out", str(sub)])
-    assert res.exit_code == 0, res.output
-    meta = json.loads((tmp_path / "tsf.meta.json").read_text())
-    assert meta["method"] == "timesformer" and meta["latency_ms_per_sample_median"] > 0
-    res = runner.invoke(app, ["eval", str(sub), "--dataset", str(vts_dataset), "--split",
-                              "unseen_objects", "--out", str(tmp_path / "ev"), "--no-figures"])
-    assert res.exit_code == 0, res.output
-    doc = json.loads((tmp_path / "ev" / "metrics.json").read_text())
+    doc = predict_and_eval("timesformer", ckpt, vts_dataset, "unseen_objects", tmp_path, "tsf")
     assert set(doc["tasks"]) == {"state", "direction"}
 
 
