@@ -42,16 +42,36 @@ def folder_frames(path: Path) -> list[Path]:
     return sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_EXTS)
 
 
-def read_image(path: Path) -> np.ndarray:
+def read_image(path: Path, out: np.ndarray | None = None) -> np.ndarray:
     """One image file as RGB uint8; one-line error if missing or undecodable.
 
-    Decoded straight to RGB (IMREAD_COLOR_RGB, OpenCV >= 4.11) rather than to BGR and then
-    swapped (a copy of the frame)."""
+    PNGs of 8-bit RGB rows sharing one filter (what vtsbench writes) are decoded by
+    `vtsbench.recordings.png` (2.3x OpenCV for Up rows); anything else by OpenCV, straight to
+    RGB (IMREAD_COLOR_RGB, OpenCV >= 4.11) rather than to BGR and then swapped.
+    out: a uint8 (H, W, 3) array the fast path decodes into when the image has its shape (a
+    shard's row: no copy); the result is returned either way, in out or not."""
+    from .png import SIGNATURE, decode_rgb
+
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise VtsError("file not found", path) from None
+    except IsADirectoryError:
+        raise VtsError("is a folder, not an image", path) from None
+    except OSError as e:
+        raise VtsError(f"cannot read ({e.strerror or e})", path) from None
+    if data[:8] == SIGNATURE:
+        img = decode_rgb(data, out)
+        if img is not None:
+            return img
     cv2 = _cv2()
-    if not path.is_file():
-        raise VtsError("file not found", path)
     rgb = getattr(cv2, "IMREAD_COLOR_RGB", None)
-    img = cv2.imread(str(path), cv2.IMREAD_COLOR if rgb is None else rgb)
+    if not data:
+        raise VtsError("cannot decode image (empty file)", path)
+    try:
+        img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR if rgb is None else rgb)
+    except cv2.error:
+        img = None
     if img is None or not img.size:
         raise VtsError("cannot decode image", path)
     return cv2.cvtColor(img, cv2.COLOR_BGR2RGB) if rgb is None else img
@@ -135,7 +155,7 @@ def read_frames(path: Path, start: int = 0, stop: int | None = None,
     if kind == "image":
         if start != 0 or (stop is not None and stop != 1):
             raise VtsError(f"an image file holds one frame, asked for [{start}, {stop})", path)
-        return _into(out, [read_image(path)])
+        return _into(out, [read_image(path, None if out is None else out[0])])
     if kind == "folder":
         files = folder_frames(path)
         stop = len(files) if stop is None else stop
@@ -144,11 +164,12 @@ def read_frames(path: Path, start: int = 0, stop: int | None = None,
         if out is None or len(out) != stop - start:
             return np.stack([read_image(f) for f in files[start:stop]])
         for t, f in enumerate(files[start:stop]):
-            img = read_image(f)
+            img = read_image(f, out[t])  # decoded in place when it can be
             if img.shape != out.shape[1:]:  # another size: the caller sees it in the result
                 return np.stack([*out[:t], img,
                                  *(read_image(g) for g in files[start + t + 1:stop])])
-            out[t] = img  # one copy per frame, not a stack and then a copy into the shard
+            if not np.shares_memory(img, out[t]):
+                out[t] = img  # one copy per frame, not a stack and then a copy into the shard
         return out
     frames = _read_video(path, start, stop)
     if out is not None and out.shape == frames.shape:
@@ -161,7 +182,8 @@ def _into(out: np.ndarray | None, imgs: list[np.ndarray]) -> np.ndarray:
     """The frames in out when they fit it, else stacked in a new array."""
     if out is not None and out.shape == (len(imgs), *imgs[0].shape):
         for t, img in enumerate(imgs):
-            out[t] = img
+            if not np.shares_memory(img, out[t]):  # else decoded there already
+                out[t] = img
         return out
     return np.stack(imgs)
 
@@ -251,17 +273,18 @@ def write_png(path: Path, rgb: np.ndarray, compression: int = 1) -> None:
 
     Huffman-only deflate: tactile frames carry sensor noise that defeats LZ matching; measured on
     a noisy 480x640 frame, 14.8 ms and 14 % smaller against 20.1 ms for the default strategy.
-    One row filter, Sub, instead of libpng choosing one per row: lossless as any filter, and on
-    simulated 480x640 frames (one core of a 2-core AMD EPYC, best of 3 over 16 frames) writing
-    takes 8.1 instead of 15.1 ms and decoding 4.4 instead of 4.8 ms, for 5 % more bytes
-    (505 against 480 kB). (No filter decodes in 3.9 ms but takes 58 % more bytes; Paeth rows,
-    which the adaptive choice also picks, decode in 8.7 ms.)
+    One row filter, Up, instead of libpng choosing one per row: lossless as any filter, and the
+    one `vtsbench.recordings.png` unfilters fastest (whole-array additions down the columns).
+    On 48 simulated 480x640 frames (one core of a 2-core AMD EPYC): Up 494 kB, written in
+    8.9 ms, decoded in 1.8 ms by vtsbench and 4.1 ms by OpenCV; Sub 497 kB, 9.4, 2.9 and 4.7 ms;
+    libpng's choice per row 480 kB and 15.1 ms to write (Paeth rows, which it also picks, take
+    8.7 ms to decode with OpenCV and go to OpenCV here).
     """
     cv2 = _cv2()
     ok, buf = cv2.imencode(".png", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR),
                            [cv2.IMWRITE_PNG_COMPRESSION, compression,
                             cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY,
-                            cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_SUB])
+                            cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_UP])
     if not ok:
         raise VtsError("cannot encode PNG", path)
     path.write_bytes(buf.tobytes())
