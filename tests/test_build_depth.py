@@ -83,7 +83,7 @@ def test_depth_maker_equals_reconstruct(sim_recordings: Path) -> None:
     cal = load_calibration(sim_recordings / "calibration.safetensors")
     frames = read_frames(sim_recordings / "sequences" / "seq-00002", 0, 8)
     mk = DepthMaker(cal)
-    assert mk.lut is not None and mk.still_is_zero
+    assert mk.lut is not None and mk.still_is_zero and mk.zero_folded
     for solver in ("dct", "dst"):
         want = reconstruct(frames, cal, solver=solver)
         got = np.stack([mk.depth(f, solver) for f in frames])
@@ -101,3 +101,20 @@ def test_depth_maker_equals_reconstruct(sim_recordings: Path) -> None:
     # a mapping other than the lut goes through its own predict, with the same result
     mk.lut = None
     assert np.array_equal(mk.depth(frames[3]), reconstruct(frames[3], cal))
+
+
+def test_channel_sum_is_numpys_float32_sum() -> None:
+    """contact sums the squared channels with cv2.transform: the same float32 values as numpy's
+    (r + g) + b, including magnitudes far apart, zeros and the colour limit's squares."""
+    import cv2
+
+    from vtsbench.dataset.depthmaps import _ONES
+
+    rng = np.random.default_rng(0)
+    scale = 10.0 ** rng.integers(-6, 5, (256, 320, 3))
+    sq = (rng.random((256, 320, 3)) * scale).astype(np.float32)
+    sq[::7, :, 1] = 0.0
+    sq[::5, ::3] = np.float32(118.86745) ** 2
+    want = (sq[..., 0] + sq[..., 1]) + sq[..., 2]
+    assert want.dtype == np.float32
+    assert np.array_equal(cv2.transform(sq, _ONES), want)
