@@ -2,6 +2,7 @@
 
 Run: .venv/bin/python benchmarks/build.py [--static 120] [--sequences 120] [--size 480x640]
                                           [--recordings DIR] [--repeats 2] [--keep] [--level1]
+                                          [--cli-only]
 
 Simulates recordings (static frames, 8-frame sequences and 20 calibration presses) in a
 temporary folder and calibrates them (lut), unless --recordings names a folder that already
@@ -19,7 +20,12 @@ has calibration.safetensors. Then:
    at levels 0, 1 and 3, crc32c, sha256);
 3. re-encodes the built arrays with zstd levels 1, 3 and 9 and without compression: bytes on
    disk against raw (uint8 RGB + float32 depth), write speed (encode + write whole shards) and
-   read speed (every sample through zarr), in frames/s, best of 2.
+   read speed (every sample through zarr), in frames/s, best of 2;
+4. decodes 48 of the recordings' PNG frames with vtsbench's reader and with OpenCV's
+   `cv2.imread`, as written (Up rows), with Sub rows and with libpng's filter choice per row.
+
+--cli-only runs only the fresh-process builds and 4 (at the demo's size, say:
+`--recordings demo-data/recordings --cli-only`).
 
 Prints markdown tables and the machine; removes everything it wrote (unless --keep).
 """
@@ -29,6 +35,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import re
 import shutil
 import sys
 import tempfile
@@ -138,14 +145,17 @@ def timed_cli(rec: Path, out: Path, workers: int, repeats: int) -> dict[str, flo
         shutil.rmtree(out, ignore_errors=True)
         kids = resource.getrusage(resource.RUSAGE_CHILDREN)
         b0, t0 = _busy_seconds(), time.perf_counter()
-        subprocess.run([sys.executable, "-m", "vtsbench", "build", str(rec), str(out),
-                        "--workers", str(workers)], check=True, capture_output=True)
+        done = subprocess.run([sys.executable, "-m", "vtsbench", "build", str(rec), str(out),
+                               "--workers", str(workers)], check=True, capture_output=True,
+                              text=True)
         total = time.perf_counter() - t0
+        frames = re.search(r"(\d+) frames in", done.stdout + done.stderr)
         k = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = k.ru_utime + k.ru_stime - kids.ru_utime - kids.ru_stime
         others = max(0.0, _busy_seconds() - b0 - cpu) / total
         if not best or total < best["total"]:
-            best = {"total": total, "cpu": cpu, "others": others}
+            best = {"total": total, "cpu": cpu, "others": others,
+                    "frames": int(frames.group(1)) if frames else float("nan")}
     shutil.rmtree(out, ignore_errors=True)
     return best
 
@@ -257,6 +267,61 @@ def encode_parts(ds: Path) -> dict[str, float]:
     return out
 
 
+def png_decoding(rec: Path, work: Path, n_frames: int = 48) -> list[dict[str, Any]]:
+    """CPU ms per frame of decoding the recordings' PNG frames with vtsbench's reader
+    (`read_image`: its own fast path, OpenCV for other PNGs) against OpenCV's `cv2.imread`
+    straight to RGB, the same files in the same run (best of 3, one OpenCV thread, malloc
+    keeping freed memory as in the build's workers), for the
+    frames as written (Up rows) and re-encoded with Sub rows and with libpng's filter choice
+    per row (which OpenCV writes by default, and which our reader hands to OpenCV)."""
+    import cv2
+
+    from vtsbench.recordings.media import read_image
+    from vtsbench.recordings.png import decode_rgb
+
+    cv2.setNumThreads(1)
+    files = sorted((rec / "sequences").rglob("*.png"))[:n_frames]
+    tmp = work / "png-filters"
+    variants = {"Up (as vtsbench writes)": files}
+    for name, folder, flag in (("Sub", "sub", cv2.IMWRITE_PNG_FILTER_SUB),
+                               ("libpng's choice per row", "adaptive", None)):
+        out = tmp / folder
+        out.mkdir(parents=True, exist_ok=True)
+        params = [cv2.IMWRITE_PNG_COMPRESSION, 1,
+                  cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
+        if flag is not None:
+            params += [cv2.IMWRITE_PNG_FILTER, flag]
+        paths = []
+        for i, f in enumerate(files):
+            p = out / f"{i:04d}.png"
+            cv2.imwrite(str(p), cv2.imread(str(f), cv2.IMREAD_UNCHANGED), params)
+            paths.append(p)
+        variants[name] = paths
+
+    def best(fn: Any, paths: list[Path]) -> float:
+        b = float("inf")
+        for _ in range(3):
+            t0 = time.process_time()
+            for p in paths:
+                fn(p)
+            b = min(b, time.process_time() - t0)
+        return b / len(paths) * 1000
+
+    rows = []
+    for name, paths in variants.items():
+        with build_mod._malloc_keeps_memory():  # as in the build's workers
+            ours = best(read_image, paths)
+            theirs = best(lambda p: cv2.imread(str(p), cv2.IMREAD_COLOR_RGB), paths)
+        fast = sum(decode_rgb(p.read_bytes()) is not None for p in paths)
+        same = all(np.array_equal(read_image(p), cv2.imread(str(p), cv2.IMREAD_COLOR_RGB))
+                   for p in paths)
+        rows.append({"filter": name, "kB": np.mean([p.stat().st_size for p in paths]) / 1000,
+                     "ours": ours, "opencv": theirs, "fast": fast, "n": len(paths),
+                     "same": same})
+    shutil.rmtree(tmp, ignore_errors=True)
+    return rows
+
+
 def storage(ds: Path, work: Path, levels: list[int]) -> list[dict[str, float]]:
     """Re-encode the built arrays at each level: bytes, write and read frames/s (best of 2)."""
     data, layouts = {}, {}
@@ -312,6 +377,9 @@ def main() -> None:
     ap.add_argument("--keep", action="store_true", help="keep the temporary folder")
     ap.add_argument("--level1", action="store_true",
                     help="also build with 2 workers at zstd level 1")
+    ap.add_argument("--cli-only", action="store_true",
+                    help="only `vtsbench build` in a fresh process (1 and 2 workers) and the "
+                         "PNG decoding")
     args = ap.parse_args()
     size = tuple(int(v) for v in args.size.lower().split("x"))
     work = Path(tempfile.mkdtemp(prefix="vtsbench-bench-build-"))
@@ -323,9 +391,15 @@ def main() -> None:
             make_recordings(rec, args.static, args.sequences, size)  # type: ignore[arg-type]
             print(f"simulated and calibrated in {time.perf_counter() - t0:.1f} s",
                   file=sys.stderr)
+        decoding = png_decoding(rec, work)
+        cli = {w: timed_cli(rec, work / "ds-cli", w, args.repeats) for w in (1, 2)}
+        if args.cli_only:
+            report_cli(cli)
+            report_png(decoding)
+            print(f"\nMachine: {machine()}")
+            return
         runs: dict[Any, dict[str, float]] = {
             w: timed_build(rec, work / f"ds{w}", w, args.repeats) for w in (1, 2)}
-        cli = {w: timed_cli(rec, work / "ds-cli", w, args.repeats) for w in (1, 2)}
         if args.level1:  # the same build at zstd level 1 (not the default), 2 workers
             runs["2, zstd level 1"] = timed_build(rec, work / "ds-l1", 2, args.repeats, level=1)
             shutil.rmtree(work / "ds-l1", ignore_errors=True)
@@ -333,6 +407,8 @@ def main() -> None:
         parts = encode_parts(work / "ds1")
         rows = storage(work / "ds1", work, [0, 1, 3, 9])
         report(runs, cli, stages, parts, rows, size)  # type: ignore[arg-type]
+        report_png(decoding)
+        print(f"\nMachine: {machine()}")
     finally:
         if args.keep:
             print(f"kept {work}", file=sys.stderr)
@@ -359,13 +435,7 @@ def report(runs: dict[Any, dict[str, float]], cli: dict[int, dict[str, float]],
     print(f"\n2 workers / 1 worker: {runs[1]['total'] / runs[2]['total']:.2f}x end to end, "
           f"{runs[1]['shards'] / runs[2]['shards']:.2f}x in the shard phase. (Builds in this "
           "process after the first: imports done; the first build's are in the next table.)\n")
-    print(f"`vtsbench build REC OUT --workers N` in a fresh process (Python's start and all "
-          f"imports included), {n} frames:\n")
-    print("| workers | wall (s) | frames/s | CPU ms per frame | other processes (cores) |")
-    print("|---:|---:|---:|---:|---:|")
-    for k, r in cli.items():
-        print(f"| {k} | {r['total']:.1f} | {n / r['total']:.1f} | {r['cpu'] / n * 1000:.1f} "
-              f"| {r['others']:.2f} |")
+    report_cli(cli)
     print()
     print("### Per frame, one process (ms)\n")
     print("| " + " | ".join(stages) + " | total |")
@@ -384,7 +454,30 @@ def report(runs: dict[Any, dict[str, float]], cli: dict[int, dict[str, float]],
         name = f"zstd level {r['level']}" if r["level"] else "none (crc32c only)"
         print(f"| {name} | {r['bytes'] / 1e6:.1f} | {r['raw'] / 1e6:.1f} | "
               f"{r['bytes'] / r['raw']:.1%} | {r['write']:.0f} | {r['read']:.0f} |")
-    print(f"\nMachine: {machine()}")
+
+
+def report_cli(cli: dict[int, dict[str, float]]) -> None:
+    """The fresh-process builds' table."""
+    n = int(next(iter(cli.values()))["frames"])
+    print(f"`vtsbench build REC OUT --workers N` in a fresh process (Python's start and all "
+          f"imports included), {n} frames:\n")
+    print("| workers | wall (s) | frames/s | CPU ms per frame | other processes (cores) |")
+    print("|---:|---:|---:|---:|---:|")
+    for k, r in cli.items():
+        print(f"| {k} | {r['total']:.1f} | {n / r['total']:.1f} | {r['cpu'] / n * 1000:.1f} "
+              f"| {r['others']:.2f} |")
+
+
+def report_png(rows: list[dict[str, Any]]) -> None:
+    """The PNG decoding table."""
+    print("\n### Decoding the recordings' PNG frames, CPU ms a frame (one core)\n")
+    print("| rows filtered | kB a frame | vtsbench `read_image` | OpenCV `cv2.imread` "
+          "| OpenCV / vtsbench | decoded by the fast path | same pixels |")
+    print("|---|---:|---:|---:|---:|---:|---|")
+    for r in rows:
+        print(f"| {r['filter']} | {r['kB']:.0f} | {r['ours']:.2f} | {r['opencv']:.2f} "
+              f"| {r['opencv'] / r['ours']:.2f}x | {r['fast']} of {r['n']} "
+              f"| {'yes' if r['same'] else 'NO'} |")
 
 
 if __name__ == "__main__":

@@ -77,7 +77,8 @@ class DepthMaker:
                             "weights": np.array([[b * b, b, 1]], np.float32),
                             "words": table.view(np.uint64).reshape(-1),
                             "k": np.empty((h, w, 3), np.float32),
-                            "idx": np.empty((h, w), np.int32)}
+                            # np.intp: np.take would cast any other index type (0.15 ms)
+                            "idx": np.empty((h, w), np.intp)}
         self.still_is_zero = self._still_is_zero()
         if self.lut is not None and self.still_is_zero:
             self.lut["zero_folded"] = self._fold_zero()
