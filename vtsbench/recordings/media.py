@@ -46,7 +46,7 @@ def read_image(path: Path, out: np.ndarray | None = None) -> np.ndarray:
     """One image file as RGB uint8; one-line error if missing or undecodable.
 
     PNGs of 8-bit RGB rows sharing one filter (what vtsbench writes) are decoded by
-    `vtsbench.recordings.png` (2.3x OpenCV for Up rows); anything else by OpenCV, straight to
+    `vtsbench.recordings.png` (about 2x OpenCV for Up rows); anything else by OpenCV, straight to
     RGB (IMREAD_COLOR_RGB, OpenCV >= 4.11) rather than to BGR and then swapped.
     out: a uint8 (H, W, 3) array the fast path decodes into when the image has its shape (a
     shard's row: no copy); the result is returned either way, in out or not."""
@@ -276,7 +276,7 @@ def write_png(path: Path, rgb: np.ndarray, compression: int = 1) -> None:
     One row filter, Up, instead of libpng choosing one per row: lossless as any filter, and the
     one `vtsbench.recordings.png` unfilters fastest (whole-array additions down the columns).
     On 48 simulated 480x640 frames (one core of a 2-core AMD EPYC): Up 494 kB, written in
-    8.9 ms, decoded in 1.8 ms by vtsbench and 4.1 ms by OpenCV; Sub 497 kB, 9.4, 2.9 and 4.7 ms;
+    8.9 ms, decoded in 2.0 ms by vtsbench and 4.1 ms by OpenCV; Sub 497 kB, 9.4, 2.9 and 4.4 ms;
     libpng's choice per row 480 kB and 15.1 ms to write (Paeth rows, which it also picks, take
     8.7 ms to decode with OpenCV and go to OpenCV here).
     """

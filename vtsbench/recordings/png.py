@@ -1,18 +1,20 @@
 """Fast decoding of the PNG frames recordings are made of: 8-bit RGB rows sharing one filter.
 
 Why not only OpenCV: `cv2.imdecode` goes through libpng, which inflates row by row with zlib,
-checks every chunk's CRC and unfilters in its own loop. On a 480x640 simulated frame (one core
-of a 2-core AMD EPYC, 48 frames, benchmarks/build.py) it takes 5.4 ms with Sub rows and 4.2 ms
-with Up rows. Here the chunks are parsed in Python, the zlib stream is inflated in one call by
-ISA-L (`isal`: 1.4 ms against 3.1 ms for zlib's inflate; zlib when isal is absent) and the rows
-are unfiltered with whole-array numpy additions (a prefix sum by doubling, exact in uint8:
-0.3 ms against 2.8 ms for numpy's own cumulative sum): about 1.8 ms a frame.
+checks every chunk's CRC and unfilters in its own loop. On 480x640 simulated frames (one core
+of a 2-core AMD EPYC, 48 frames, benchmarks/build.py) `cv2.imread` takes 4.4 ms a frame with
+Sub rows and 4.1 ms with Up rows. Here the chunks are parsed in Python, the zlib stream is
+inflated in one call by ISA-L (`isal`: 1.4 ms against 3.1 ms for zlib's inflate; zlib when isal
+is absent) and the rows are unfiltered with whole-array numpy additions (a prefix sum by
+doubling, exact in uint8: 0.3 ms against 2.8 ms for numpy's own cumulative sum): 2.0 ms a
+frame with Up rows and 2.9 ms with Sub rows, file reading included.
 
 Only what that covers is decoded here: 8-bit RGB, not interlaced, every row filtered None, every
-row Sub, or every row Up (what vtsbench's own writers and most cameras' savers produce).
-`decode_rgb` returns None for any other PNG (palette, grey, alpha, 16-bit, interlaced, Avg or
-Paeth rows, mixed filters) and for one it cannot parse, and the caller hands the bytes to
-OpenCV, so a file decodes here exactly when and as it decodes there (tests/test_png.py).
+row Sub, or every row Up (what vtsbench's own writers produce; the DIGIT and GelSight Mini
+frames we tested from other labs too, PIL's and OpenCV's defaults not). `decode_rgb` returns
+None for any other PNG (palette, grey, alpha, 16-bit, interlaced, Avg or Paeth rows, mixed
+filters) and for one it cannot parse, and the caller hands the bytes to OpenCV, so a file
+decodes here exactly when and as it decodes there (tests/test_png.py).
 """
 
 from __future__ import annotations
@@ -68,8 +70,8 @@ def decode_rgb(data: bytes | bytearray | memoryview, out: np.ndarray | None = No
         # the first rows' filters first: a file with another filter (libpng's choice per row
         # mixes them from the start) goes to OpenCV without being inflated here in full
         # (from the first 64 kB of the stream: the inflater copies the input it leaves over)
-        head = _inflater().decompress(memoryview(idat)[:_PEEK], 2 * stride)
-        if len(head) >= min(h, 2) * stride and not _one_filter(head[::stride][:2]):
+        first = _inflater().decompress(memoryview(idat)[:_PEEK], 2 * stride)
+        if len(first) >= min(h, 2) * stride and not _one_filter(first[::stride][:2]):
             return None
         raw = _inflate(idat, bufsize=h * stride)
     except _INFLATE_ERRORS:
