@@ -87,18 +87,17 @@ class Probe:
     width: int
 
 
-_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-
-
 def png_size(path: Path) -> tuple[int, int] | None:
     """(height, width) from a PNG file's header (IHDR) without decoding it; None when the file
     does not start like a PNG."""
+    from .png import SIGNATURE
+
     try:
         with open(path, "rb") as fh:
             head = fh.read(24)
     except OSError:
         return None
-    if len(head) < 24 or head[:8] != _PNG_SIGNATURE or head[12:16] != b"IHDR":
+    if len(head) < 24 or head[:8] != SIGNATURE or head[12:16] != b"IHDR":
         return None
     w, h = int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
     return (h, w) if h > 0 and w > 0 else None
