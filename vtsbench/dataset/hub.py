@@ -1,0 +1,470 @@
+"""`vtsbench export-hf`: every sample of a built dataset in parquet under `hf/`, for `datasets`.
+
+One parquet set per kind holds each sample once. The samples are grouped into *cells*: the
+samples that fall in the same part of every split scheme of their kind (e.g. train of
+unseen_objects, test of seen, fold3 of object_folds). Each cell is written to its own files, so
+every split of every scheme is a list of whole files: the card's YAML `configs` give
+`slip_<scheme>` and `static_<scheme>` configs whose splits point at those files, and no sample is
+stored twice however many schemes hold it.
+
+Columns: the index's labels (object, state and direction as ClassLabel ids), `rgb` as PNG images
+(a list of T for a slip sample; lossless uint8), `depth` as float32 mm (exactly the loader's
+values: the stored int16 counts x 0.001), `contact` as bool, and `depth_preview`, a colour-mapped
+PNG of the depth for the Hub viewer. The arrow schema carries the `huggingface` features
+metadata.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..errors import VtsError
+from ..labels import DIRECTION_NAMES, STATES
+from .schema import INFO_PATH, KINDS
+
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+    from .loader import VtsDataset, View
+
+#: Folder of the parquet files, relative to the dataset.
+HUB_DIR = "hf"
+#: Encoded bytes per row group (the Hub viewer reads one row group at a time) and per file.
+ROW_GROUP_BYTES = 16 * 2**20
+FILE_BYTES = 256 * 2**20
+#: Parts of a split scheme -> split names of `datasets` (train, validation, test; folds as is).
+SPLIT_NAMES = {"val": "validation"}
+#: The depth preview maps 0 .. max(this, the sample's maximum) mm to the viridis colour map.
+PREVIEW_MIN_RANGE_MM = 0.05
+#: Index columns written as they are (the labels with names are ClassLabel columns).
+PLAIN_COLUMNS = ("sample_id", "row", "session", "sensor", "mm_per_px_x", "mm_per_px_y",
+                 "press_depth_mm", "contact_x_px", "contact_y_px")
+SLIP_PLAIN = ("motion_dx_mm", "motion_dy_mm")
+
+
+def config_name(kind: str, scheme: str) -> str:
+    """The `datasets` config of a split scheme: `<kind>_<scheme>`, without repeating the kind
+    (static_sessions stays static_sessions)."""
+    return scheme if scheme.startswith(f"{kind}_") else f"{kind}_{scheme}"
+
+
+def split_name(part: str) -> str:
+    """The `datasets` split of a part: val -> validation; train, test, foldK unchanged."""
+    return SPLIT_NAMES.get(part, part)
+
+
+def size_category(n: int) -> str:
+    """The Hub's size_categories value for n rows."""
+    for limit, name in ((1_000, "n<1K"), (10_000, "1K<n<10K"), (100_000, "10K<n<100K"),
+                        (1_000_000, "100K<n<1M"), (10_000_000, "1M<n<10M")):
+        if n < limit:
+            return name
+    return "n>10M"
+
+
+# -- images --------------------------------------------------------------------------------
+
+
+def png(img: np.ndarray, smooth: bool = False) -> bytes:
+    """PNG bytes of an RGB or grey uint8 image, fixed settings (level 1, one row filter).
+
+    RGB sensor frames: Huffman only with the sub filter (their noise defeats LZ matching; see
+    card._png for the measurements); smooth=True (colour-mapped depth, masks): LZ with the up
+    filter, which shrinks large flat areas to almost nothing.
+    """
+    import cv2
+
+    params = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_FILTER,
+              cv2.IMWRITE_PNG_FILTER_UP if smooth else cv2.IMWRITE_PNG_FILTER_SUB]
+    if img.ndim == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_RGB2BGR)
+        if not smooth:
+            params += [cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
+    ok, buf = cv2.imencode(".png", img, params)
+    if not ok:
+        raise ValueError("cannot encode PNG")
+    return buf.tobytes()
+
+
+def depth_range_mm(depth_mm: np.ndarray) -> float:
+    """The top of a sample's preview colour scale: its maximum depth, at least
+    PREVIEW_MIN_RANGE_MM (an untouched gel is not blown up into colour noise)."""
+    top = float(np.max(depth_mm)) if depth_mm.size else 0.0
+    return max(PREVIEW_MIN_RANGE_MM, top if np.isfinite(top) else 0.0)
+
+
+def depth_colour(depth_mm: np.ndarray, top_mm: float) -> np.ndarray:
+    """An RGB uint8 image of one depth frame: 0 .. top_mm mm on viridis (negatives as 0)."""
+    import cv2
+
+    level = np.clip(np.asarray(depth_mm, np.float32) * np.float32(255.0 / top_mm), 0, 255)
+    bgr = cv2.applyColorMap(level.astype(np.uint8), cv2.COLORMAP_VIRIDIS)
+    return np.ascontiguousarray(bgr[..., ::-1])
+
+
+def depth_preview_pngs(depth_mm: np.ndarray) -> list[bytes]:
+    """Colour-mapped PNGs of a sample's depth (one per frame; one for a static sample), on one
+    scale for the whole sample."""
+    frames = depth_mm if depth_mm.ndim == 3 else depth_mm[None]
+    top = depth_range_mm(frames)
+    return [png(depth_colour(f, top), smooth=True) for f in frames]
+
+
+# -- schema --------------------------------------------------------------------------------
+
+
+def features_doc(info: Any, kind: str) -> dict[str, Any]:
+    """The `datasets` features (as the JSON datasets writes) of a kind's hub files."""
+    seq = kind == "slip"
+    t = info.frames_per_sequence
+    h, w = info.resolution
+
+    def value(dtype: str) -> dict[str, Any]:
+        return {"dtype": dtype, "_type": "Value"}
+
+    def maybe_list(feat: dict[str, Any]) -> dict[str, Any]:
+        return {"feature": feat, "length": t, "_type": "Sequence"} if seq else feat
+
+    feats: dict[str, Any] = {
+        "sample_id": value("string"), "row": value("int64"),
+        "object": {"names": list(info.objects), "_type": "ClassLabel"},
+        "session": value("string"), "sensor": value("string"),
+        "mm_per_px_x": value("float64"), "mm_per_px_y": value("float64"),
+        "press_depth_mm": value("float64"), "contact_x_px": value("float64"),
+        "contact_y_px": value("float64")}
+    if seq:
+        feats["state"] = {"names": list(STATES), "_type": "ClassLabel"}
+        feats["direction"] = {"names": list(DIRECTION_NAMES), "_type": "ClassLabel"}
+        feats["motion_dx_mm"] = value("float64")
+        feats["motion_dy_mm"] = value("float64")
+    feats["source"] = value("string")
+    feats["rgb"] = maybe_list({"_type": "Image"})
+    if info.has_depth:
+        shape = [t, h, w] if seq else [h, w]
+        array = "Array3D" if seq else "Array2D"
+        feats["depth"] = {"shape": shape, "dtype": "float32", "_type": array}
+        feats["contact"] = {"shape": shape, "dtype": "bool", "_type": array}
+        feats["depth_preview"] = maybe_list({"_type": "Image"})
+    return feats
+
+
+def arrow_schema(info: Any, kind: str) -> pa.Schema:
+    """The arrow schema of a kind's hub files: datasets' own (its extension types for the
+    depth and contact arrays, so that `load_dataset` gives them back as Array2D/3D, and the
+    `huggingface` features metadata), with the depth unit on the depth field."""
+    import datasets
+
+    schema = datasets.Features.from_dict(features_doc(info, kind)).arrow_schema
+    if "depth" in schema.names:
+        i = schema.get_field_index("depth")
+        meta = {"units": "mm", "meaning": "indentation into the gel, positive into the gel",
+                "stored_as": f"int16 counts x {info.depth_scale_mm} mm"}
+        schema = schema.set(i, schema.field(i).with_metadata(meta))
+    return schema
+
+
+def _nested(arr: np.ndarray) -> pa.Array:
+    """(n, *dims) numpy -> arrow list<list<...>> of n rows, without a Python object per value."""
+    import pyarrow as pa
+
+    out: pa.Array = pa.array(np.ascontiguousarray(arr).reshape(-1))
+    for d in reversed(arr.shape[1:]):
+        n = len(out) // d
+        out = pa.ListArray.from_arrays(pa.array(np.arange(0, (n + 1) * d, d, dtype=np.int32)),
+                                       out)
+    return out
+
+
+# -- cells ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Cell:
+    """Samples of one kind that share their part in every scheme (None: not in the scheme)."""
+
+    parts: tuple[str | None, ...]
+    positions: np.ndarray
+
+
+def schemes_of(ds: VtsDataset, kind: str) -> list[str]:
+    """The split schemes of a kind, by name."""
+    return [s for s in ds.splits if ds.split_file(s).kind == kind]
+
+
+def cells(ds: VtsDataset, kind: str) -> list[Cell]:
+    """The cells of a kind in order of their first sample (index order inside each)."""
+    n = len(ds.view(kind))
+    schemes = schemes_of(ds, kind)
+    keys: list[list[str | None]] = [[None] * len(schemes) for _ in range(n)]
+    for j, scheme in enumerate(schemes):
+        split = ds.split_file(scheme)
+        for part in ds.parts(scheme):
+            for p in ds._part_positions(split, part):
+                keys[int(p)][j] = part
+    groups: dict[tuple[str | None, ...], list[int]] = {}
+    for p, key in enumerate(keys):
+        groups.setdefault(tuple(key), []).append(p)
+    return [Cell(k, np.asarray(v, np.int64)) for k, v in groups.items()]
+
+
+# -- writing -------------------------------------------------------------------------------
+
+
+@dataclass
+class HubFile:
+    """One written parquet file: its path (relative to the dataset), cell and rows."""
+
+    path: str
+    cell: int
+    rows: int
+    nbytes: int
+
+
+def _label_columns(view: View, kind: str) -> dict[str, pa.Array]:
+    """The label columns of a view's samples, in schema order (without the arrays)."""
+    import pyarrow as pa
+
+    idx = view.index
+    cols: dict[str, pa.Array] = {}
+    for name in PLAIN_COLUMNS[:2]:
+        cols[name] = idx.column(name).combine_chunks()
+    cols["object"] = idx.column("class_idx").cast(pa.int64()).combine_chunks()
+    for name in PLAIN_COLUMNS[2:]:
+        cols[name] = idx.column(name).combine_chunks()
+    if kind == "slip":
+        cols["state"] = idx.column("state_idx").cast(pa.int64()).combine_chunks()
+        cols["direction"] = idx.column("direction").cast(pa.int64()).combine_chunks()
+        for name in SLIP_PLAIN:
+            cols[name] = idx.column(name).combine_chunks()
+    cols["source"] = idx.column("source").combine_chunks()
+    return cols
+
+
+def _encode_sample(rgb: np.ndarray, depth: np.ndarray | None) -> tuple[list[bytes],
+                                                                        list[bytes]]:
+    """PNGs of one sample: rgb frames and depth previews (one each for a static sample)."""
+    frames = rgb if rgb.ndim == 4 else rgb[None]
+    pngs = [png(f) for f in frames]
+    return pngs, ([] if depth is None else depth_preview_pngs(depth))
+
+
+def _images(pngs: list[list[bytes]], seq: bool) -> pa.Array:
+    import pyarrow as pa
+
+    image = pa.struct([("bytes", pa.binary()), ("path", pa.string())])
+    if seq:
+        return pa.array([[{"bytes": b, "path": None} for b in s] for s in pngs],
+                        pa.list_(image, len(pngs[0]) if pngs else -1))
+    return pa.array([{"bytes": s[0], "path": None} for s in pngs], image)
+
+
+def _batch(view: View, schema: pa.Schema, pool: ThreadPoolExecutor) -> pa.Table:
+    """The table of a view's samples (read in one call, PNGs encoded by the pool)."""
+    import pyarrow as pa
+
+    kind = view.kind
+    arrays = view.arrays
+    data = view.read(slice(None), arrays)
+    depth = data.get("depth")
+    encoded = list(pool.map(lambda i: _encode_sample(
+        data["rgb"][i], None if depth is None else depth[i]), range(len(view))))
+    cols = _label_columns(view, kind)
+    seq = kind == "slip"
+    cols["rgb"] = _images([e[0] for e in encoded], seq)
+    if depth is not None:
+        cols["depth"] = _nested(depth)
+        cols["contact"] = _nested(data["contact"])
+        cols["depth_preview"] = _images([e[1] for e in encoded], seq)
+    return pa.Table.from_arrays([_as_type(cols[f.name], f.type) for f in schema], schema=schema)
+
+
+def _as_type(arr: pa.Array, typ: pa.DataType) -> pa.Array:
+    """An array of the field's type: datasets' extension arrays wrap their storage."""
+    import pyarrow as pa
+
+    if isinstance(typ, pa.ExtensionType):
+        return pa.ExtensionArray.from_storage(typ, arr.cast(typ.storage_type))
+    return arr.cast(typ)
+
+
+def _rows_per(view: View, target: int, encoded_ratio: float = 1.0) -> int:
+    """Rows per `target` bytes, from the decoded size of a sample (an upper bound of its
+    encoded size: PNG and zstd only shrink it)."""
+    return max(1, int(target // max(1, view.nbytes() * encoded_ratio)))
+
+
+def write_kind(ds: VtsDataset, kind: str, root: Path, workers: int = 1,
+               advance: Callable[[int], None] | None = None) -> list[HubFile]:
+    """Write the hub files of one kind under root/hf/<kind>/; returns them in cell order."""
+    import pyarrow.parquet as pq
+
+    from .store import TMP_SUFFIX
+
+    folder = root / HUB_DIR / kind
+    folder.mkdir(parents=True, exist_ok=True)
+    schema = arrow_schema(ds.info, kind)
+    view = ds.view(kind)
+    group_rows = _rows_per(view, ROW_GROUP_BYTES, 0.6)
+    file_rows = max(group_rows, _rows_per(view, FILE_BYTES, 0.6) // group_rows * group_rows)
+    out: list[HubFile] = []
+    with ThreadPoolExecutor(max(1, workers)) as pool:
+        for c, cell in enumerate(cells(ds, kind)):
+            for f, start in enumerate(range(0, len(cell.positions), file_rows)):
+                rel = f"{HUB_DIR}/{kind}/{c:03d}-{f:03d}.parquet"
+                path = root / rel
+                tmp = path.with_name(f".{path.name}{TMP_SUFFIX}")
+                pos = cell.positions[start:start + file_rows]
+                with pq.ParquetWriter(tmp, schema, compression="zstd", compression_level=3,
+                                      use_byte_stream_split=["depth"]) as writer:
+                    for g in range(0, len(pos), group_rows):
+                        part = _view_at(ds, kind, pos[g:g + group_rows])
+                        writer.write_table(_batch(part, schema, pool),
+                                           row_group_size=group_rows)
+                        if advance is not None:
+                            advance(len(part))
+                tmp.replace(path)
+                out.append(HubFile(rel, c, len(pos), path.stat().st_size))
+    return out
+
+
+def _view_at(ds: VtsDataset, kind: str, positions: np.ndarray) -> View:
+    from .loader import View
+
+    return View(ds, kind, positions)
+
+
+# -- configs -------------------------------------------------------------------------------
+
+
+@dataclass
+class HubLayout:
+    """What export wrote: the files of each kind and, per config, split -> files."""
+
+    files: dict[str, list[HubFile]]
+    configs: dict[str, dict[str, list[str]]]
+    kinds: dict[str, str]  # config -> kind
+
+    def nbytes(self) -> int:
+        return sum(f.nbytes for fs in self.files.values() for f in fs)
+
+
+def hub_configs(ds: VtsDataset, files: dict[str, list[HubFile]]
+                ) -> tuple[dict[str, dict[str, list[str]]], dict[str, str]]:
+    """Per config (`<kind>_all` and one per scheme), split -> the files of its samples."""
+    configs: dict[str, dict[str, list[str]]] = {}
+    kinds: dict[str, str] = {}
+    for kind in ("slip", "static"):
+        if not files.get(kind):
+            continue
+        cell_list = cells(ds, kind)
+        schemes = schemes_of(ds, kind)
+        for j, scheme in enumerate(schemes):
+            name = config_name(kind, scheme)
+            configs[name], kinds[name] = {}, kind
+            for part in ds.parts(scheme):
+                keep = {c for c, cell in enumerate(cell_list) if cell.parts[j] == part}
+                configs[name][split_name(part)] = [f.path for f in files[kind] if f.cell in keep]
+        configs[f"{kind}_all"] = {"all": [f.path for f in files[kind]]}
+        kinds[f"{kind}_all"] = kind
+    return configs, kinds
+
+
+def configs_yaml(layout: HubLayout, default: str | None) -> list[str]:
+    """YAML lines of the hub configs (to go under `configs:`)."""
+    lines = []
+    for name, splits in layout.configs.items():
+        lines += [f"- config_name: {name}", "  data_files:"]
+        for split, paths in splits.items():
+            lines += [f"  - split: {split}", "    path:"]
+            lines += [f"    - {p}" for p in paths]
+        if name == default:
+            lines.append("  default: true")
+    return lines
+
+
+def default_config(layout: HubLayout) -> str | None:
+    """The config the Hub shows first: slip_unseen_objects (the headline benchmark), else the
+    first config."""
+    names = list(layout.configs)
+    return "slip_unseen_objects" if "slip_unseen_objects" in names else (names or [None])[0]
+
+
+# -- export --------------------------------------------------------------------------------
+
+
+@dataclass
+class ExportResult:
+    """What export_hf wrote, for the command's summary."""
+
+    layout: HubLayout
+    seconds: float
+
+
+def export_hf(dataset: str | Path, *, workers: int = 1, license: str = "unknown",
+              progress: bool = False) -> ExportResult:
+    """Write the hub copy of a built dataset into it (hf/, a new README.md) and record the new
+    files in meta/info.json, so `vtsbench verify` still checks every file.
+
+    The parquet files are written first (each through a temporary name), then the card, then
+    info.json last: an interrupted export leaves files info.json does not list (verify says
+    so) and is simply run again.
+    """
+    import shutil
+    import time
+
+    from .build import hash_files
+    from .card import write_hub_card
+    from .loader import load
+    from .store import write_file
+
+    t0 = time.perf_counter()
+    root = Path(dataset)
+    ds = load(root)
+    if ds.loc.remote:
+        raise VtsError("export-hf writes into the dataset: give a local folder", root)
+    shutil.rmtree(root / HUB_DIR, ignore_errors=True)
+    files: dict[str, list[HubFile]] = {}
+    total = sum(len(ds.view(k)) for k in KINDS)
+    with _progress(progress, total) as advance:
+        for kind in KINDS:
+            if len(ds.view(kind)):
+                files[kind] = write_kind(ds, kind, root, workers, advance)
+    configs, kinds = hub_configs(ds, files)
+    layout = HubLayout(files, configs, kinds)
+    write_hub_card(root, ds, layout, license)
+    info = ds.info
+    keep = {k: v for k, v in info.files.items()
+            if not k.startswith(f"{HUB_DIR}/") and k != "README.md"}
+    new = hash_files(root, lambda rel: rel.startswith(f"{HUB_DIR}/") or rel == "README.md")
+    info.files = dict(sorted({**keep, **new}.items()))
+    write_file(root / INFO_PATH, info.to_json().encode())
+    return ExportResult(layout, time.perf_counter() - t0)
+
+
+class _progress:
+    """A rich progress bar of samples written (a no-op callable when off)."""
+
+    def __init__(self, on: bool, total: int) -> None:
+        self.on, self.total = on, total
+        self.bar: Any = None
+
+    def __enter__(self) -> Callable[[int], None]:
+        if not self.on:
+            return lambda _n: None
+        from rich.progress import Progress
+
+        self.bar = Progress(transient=True)
+        self.bar.__enter__()
+        task = self.bar.add_task("samples", total=self.total)
+        return lambda n: self.bar.advance(task, n)
+
+    def __exit__(self, *exc: Any) -> None:
+        if self.bar is not None:
+            self.bar.__exit__(*exc)
