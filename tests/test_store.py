@@ -69,7 +69,9 @@ def test_whole_shards_read_back_by_path_and_url(tmp_path: Path, level: int) -> N
             assert g[n].shards == (2, *lay.sample_shape(n))
             assert np.array_equal(g[n][:], data[n])
     meta = json.loads((group / "zarr.json").read_text())
-    assert meta["consolidated_metadata"]["metadata"]["depth"]["attributes"]["scale"] == 0.001
+    attrs = meta["consolidated_metadata"]["metadata"]["depth"]["attributes"]
+    # CF attributes: xarray and other CF readers give mm; no _FillValue (0 is a valid depth)
+    assert attrs["scale_factor"] == 0.001 and attrs["units"] == "mm" and "_FillValue" not in attrs
     # rewriting the metadata leaves the shards alone
     write_metadata(group, lay)
     assert np.array_equal(open_group(tmp_path, "slip")["rgb"][:], data["rgb"])

@@ -287,6 +287,72 @@ def verify(
             f"{report.shards} shards checked: {len(report.problems)} problem(s)")
 
 
+@app.command("export-hf")
+def export_hf(
+    dataset: Annotated[Path, typer.Argument(help="Dataset folder (made by vtsbench build).")],
+    workers: Annotated[int, typer.Option(min=1, help="Threads encoding the PNGs.")] = 1,
+    license: Annotated[str, typer.Option(
+        help="License id for the card (a Hub license id: cc-by-4.0, mit, other...).")
+    ] = "unknown",
+    quiet: Annotated[bool, typer.Option(help="No progress bar.")] = False,
+) -> None:
+    """Write every sample as parquet under DATASET/hf/ for Hugging Face `datasets`: one config
+    per split scheme (slip_unseen_objects, slip_seen, static_sessions, ...), labels as
+    ClassLabel, RGB as PNG images, depth in mm; rewrites the card and records the files in
+    meta/info.json. Example: [bold]vtsbench export-hf data/ds --license cc-by-4.0[/]
+    """
+    from rich.console import Console
+
+    from .dataset.hub import export_hf as run_export
+    from .dataset.summary import human
+
+    res = _run(run_export, dataset, workers=workers, license=license, progress=not quiet)
+    lay = res.layout
+    n = sum(f.rows for fs in lay.files.values() for f in fs)
+    files = sum(len(fs) for fs in lay.files.values())
+    Console(highlight=False).print(
+        f"{n} samples in {files} parquet files ({human(lay.nbytes())}) in {res.seconds:.1f} s; "
+        f"configs: {', '.join(lay.configs)}")
+
+
+@app.command()
+def push(
+    dataset: Annotated[Path, typer.Argument(help="Dataset folder (made by vtsbench build).")],
+    repo_id: Annotated[str, typer.Argument(help="Hub dataset repository, e.g. my-lab/tactile.")],
+    dry_run: Annotated[bool, typer.Option(
+        help="List what would be uploaded and stop (no network).")] = False,
+    zarr: Annotated[bool, typer.Option(
+        help="Upload the Zarr arrays (data/) too, so vtsbench.load reads the repository; "
+             "--no-zarr uploads the parquet copy, index, splits and card only.")] = True,
+    private: Annotated[bool, typer.Option(help="Create the repository private.")] = False,
+    revision: Annotated[str | None, typer.Option(help="Branch to push to.")] = None,
+) -> None:
+    """Upload a verified dataset to the Hugging Face Hub (run `vtsbench export-hf` first for
+    the viewer and `datasets.load_dataset`). Example:
+    [bold]vtsbench push data/ds my-lab/tactile --dry-run[/]
+    """
+    from rich.console import Console
+
+    from .dataset.push import push as run_push
+    from .dataset.push import push_plan
+    from .dataset.summary import human
+
+    console = Console(highlight=False)
+    plan = _run(push_plan, dataset, zarr)
+    if not plan.has_hub_copy:
+        console.print("[yellow]warning[/] no hf/ folder: run `vtsbench export-hf` first for "
+                      "the Hub viewer and datasets.load_dataset configs", soft_wrap=True)
+    if dry_run:
+        for rel, size in plan.files:
+            console.print(f"{human(size):>10}  {rel}", soft_wrap=True)
+        console.print(f"dry run: would upload {len(plan.files)} files ({human(plan.nbytes)}) "
+                      f"to datasets/{repo_id}" + (f"; leaving out {len(plan.left_out)} Zarr "
+                                                  "files" if plan.left_out else ""))
+        return
+    url = _run(run_push, dataset, repo_id, zarr=zarr, private=private, revision=revision)
+    console.print(f"uploaded {len(plan.files)} files ({human(plan.nbytes)}): {url}")
+
+
 @app.command()
 def calibrate(
     recordings: Annotated[Path, typer.Argument(help="Recordings folder with ball presses.")],

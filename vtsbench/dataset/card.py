@@ -309,7 +309,8 @@ def _hub_section(info: DatasetInfo, hub: HubLayout) -> str:
                      for name, splits in hub.configs.items())
     first = default_config(hub) or ""
     first_split = next(iter(hub.configs.get(first, {"train": []})), "train")
-    depth = f"""`depth` is float32 **millimetres** of indentation into the gel (positive into the gel): the
+    depth = f"""\
+`depth` is float32 **millimetres** of indentation into the gel (positive into the gel): the
 stored int16 counts x {info.depth_scale_mm}, exactly what `vtsbench.load` returns; `contact`
 is a bool mask of the same shape; `depth_preview` is the depth colour-mapped for viewing
 (viridis, from 0 to the sample's maximum or 0.05 mm, whichever is larger).""" if (

@@ -1,9 +1,11 @@
-"""`View.to_hf`: a Hugging Face `datasets.Dataset` of a view's index rows plus its arrays.
+"""`View.to_hf`: a Hugging Face `datasets` view of a vtsbench view, streamed from the Zarr store.
 
-Built offline by `Dataset.from_generator` into Arrow files under `cache_dir`, a few rows per
-write (`writer_batch_size`) because a slip row holds megabytes. Arrays are fixed-shape features:
-rgb uint8, depth float32 mm, contact bool; `.with_format("numpy")` returns them as arrays
-(datasets widens integer arrays to int64 there: `.astype(np.uint8)` restores rgb).
+By default a `datasets.IterableDataset` whose generator reads the view a few samples per zarr
+call: nothing is copied, and iterating it yields numpy arrays of the stored dtypes (rgb uint8,
+depth float32 mm, contact bool) with the index columns. `copy=True` writes a `datasets.Dataset`
+instead (Arrow files under `cache_dir`, a few rows per write because a slip row holds
+megabytes); `.with_format("numpy", dtype=None)` reads it back without datasets' widening of
+integer arrays to int64.
 """
 
 from __future__ import annotations
@@ -48,21 +50,25 @@ def _rows(view: View, arrays: tuple[str, ...], batch: int,
             yield {**row, **{n: a[k] for n, a in data.items()}}
 
 
-def to_hf(view: View, arrays: Sequence[str] | None = None, *, writer_batch_size: int = 8,
-          cache_dir: str | os.PathLike | None = None) -> datasets.Dataset:
-    """A datasets.Dataset of the view's samples (index columns + arrays, default: every array
-    the dataset has), built offline."""
+def to_hf(view: View, arrays: Sequence[str] | None = None, *, copy: bool = False,
+          writer_batch_size: int = 8, cache_dir: str | os.PathLike | None = None
+          ) -> datasets.IterableDataset | datasets.Dataset:
+    """The view's samples (index columns + arrays, default: every array the dataset has) as a
+    datasets.IterableDataset streamed from the Zarr store, or with copy=True a
+    datasets.Dataset written offline under cache_dir."""
     arrays = view.arrays if arrays is None else tuple(arrays)
     from .loader import check_arrays
 
     check_arrays(view.dataset.info, arrays)
     feats = features(view, arrays)
-    if not len(view):
-        return datasets.Dataset.from_dict({k: [] for k in feats}, features=feats)
     per = max(1, view.nbytes(arrays)) if arrays else 1
     batch = max(1, min(writer_batch_size, ITER_BYTES // per))
+    kwargs = {"view": view, "arrays": arrays, "batch": batch,
+              "dataset_sha256": view.dataset.info.dataset_sha256}
+    if not copy:
+        return datasets.IterableDataset.from_generator(_rows, features=feats, gen_kwargs=kwargs)
+    if not len(view):
+        return datasets.Dataset.from_dict({k: [] for k in feats}, features=feats)
     return datasets.Dataset.from_generator(
         _rows, features=feats, writer_batch_size=writer_batch_size,
-        cache_dir=None if cache_dir is None else str(cache_dir),
-        gen_kwargs={"view": view, "arrays": arrays, "batch": batch,
-                    "dataset_sha256": view.dataset.info.dataset_sha256})
+        cache_dir=None if cache_dir is None else str(cache_dir), gen_kwargs=kwargs)

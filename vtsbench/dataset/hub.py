@@ -16,7 +16,7 @@ metadata.
 
 from __future__ import annotations
 
-import json
+import re
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -32,7 +32,7 @@ from .schema import INFO_PATH, KINDS
 if TYPE_CHECKING:
     import pyarrow as pa
 
-    from .loader import VtsDataset, View
+    from .loader import View, VtsDataset
 
 #: Folder of the parquet files, relative to the dataset.
 HUB_DIR = "hf"
@@ -425,6 +425,9 @@ def export_hf(dataset: str | Path, *, workers: int = 1, license: str = "unknown"
     from .store import write_file
 
     t0 = time.perf_counter()
+    if not re.fullmatch(r"[a-z0-9][a-z0-9.+-]{0,63}", license):
+        raise VtsError(f"license must be a Hub license id (lower case, e.g. cc-by-4.0, mit, "
+                       f"other), got {license!r}")
     root = Path(dataset)
     ds = load(root)
     if ds.loc.remote:

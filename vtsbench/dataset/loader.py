@@ -403,21 +403,34 @@ class View:
 
     def to_torch(self, modality: str = "rgb", size: tuple[int, int] | None = None,
                  frames: int | None = None, transform: Any = None,
-                 targets: Sequence[str] = ()) -> torch.utils.data.Dataset:
-        """A torch Dataset of (tensor, target dict); see vtsbench.dataset.torch_dataset."""
+                 targets: Sequence[str] = (), *, transforms: Any = None,
+                 target_transform: Any = None) -> torch.utils.data.Dataset:
+        """A torch Dataset of (tensor, target dict); `transforms` sees the whole sample as one
+        dict, `transform` the tensor, `target_transform` the target; see
+        vtsbench.dataset.torch_dataset."""
         from .torch_dataset import TorchView
 
         return TorchView(self, modality=modality, size=size, frames=frames, transform=transform,
-                         targets=targets)
+                         targets=targets, transforms=transforms,
+                         target_transform=target_transform)
 
-    def to_hf(self, arrays: Sequence[str] | None = None, *, writer_batch_size: int = 8,
-              cache_dir: str | os.PathLike | None = None) -> datasets.Dataset:
-        """A Hugging Face datasets.Dataset of index rows plus arrays (default: all the dataset
-        has); see dataset.hf."""
+    def to_hf(self, arrays: Sequence[str] | None = None, *, copy: bool = False,
+              writer_batch_size: int = 8, cache_dir: str | os.PathLike | None = None
+              ) -> datasets.IterableDataset | datasets.Dataset:
+        """Index rows plus arrays (default: all the dataset has) as a Hugging Face
+        datasets.IterableDataset streamed from the Zarr store, or a datasets.Dataset written
+        under cache_dir with copy=True; see dataset.hf."""
         from .hf import to_hf
 
-        return to_hf(self, arrays=self.arrays if arrays is None else arrays,
+        return to_hf(self, arrays=self.arrays if arrays is None else arrays, copy=copy,
                      writer_batch_size=writer_batch_size, cache_dir=cache_dir)
+
+    def plot(self, sample: Mapping[str, Any], frame: int = -1) -> Any:
+        """A matplotlib Figure of one sample of this view (a dict as `view[i]` gives): RGB,
+        depth and contact of one frame (default the last) with its labels."""
+        from .plot import plot_sample
+
+        return plot_sample(sample, self._ds.info, frame=frame)
 
 
 def _part_key(part: str) -> tuple[int, int, str]:

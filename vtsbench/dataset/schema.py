@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     import pyarrow
 
 FORMAT = "vtsbench.dataset"
-FORMAT_VERSION = "1.0"
+FORMAT_VERSION = "1.1"
 DEPTH_SCALE_MM = 0.001
 DEPTH_DTYPE = "int16"
 KINDS = ("static", "slip")

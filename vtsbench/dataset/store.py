@@ -148,7 +148,11 @@ def _compression(level: int) -> str:
 
 def _array_attrs(name: str) -> dict[str, Any]:
     if name == "depth":
-        return {"units": "mm", "scale": DEPTH_SCALE_MM,
+        # CF conventions (scale_factor, add_offset, units), so that xarray and other CF
+        # readers give millimetres; no _FillValue: 0 is a valid depth (no indentation), and
+        # every chunk is written, so there is nothing to mask
+        return {"units": "mm", "scale_factor": DEPTH_SCALE_MM,
+                "long_name": "indentation depth into the gel",
                 "meaning": "indentation into the gel, positive into the gel",
                 "clipped_to_mm": [DEPTH_MIN_MM, DEPTH_MAX_MM]}
     if name == "rgb":
