@@ -371,7 +371,7 @@ def hub_configs(ds: VtsDataset, files: dict[str, list[HubFile]]
             for part in ds.parts(scheme):
                 keep = {c for c, cell in enumerate(cell_list) if cell.parts[j] == part}
                 configs[name][split_name(part)] = [f.path for f in files[kind] if f.cell in keep]
-        configs[f"{kind}_all"] = {"all": [f.path for f in files[kind]]}
+        configs[f"{kind}_all"] = {"full": [f.path for f in files[kind]]}
         kinds[f"{kind}_all"] = kind
     return configs, kinds
 
