@@ -109,7 +109,7 @@ def test_loads_with_datasets_offline(built: Path, tmp_path: Path) -> None:
     out = res.stdout
     assert "default ['index'] 9 seq-00001" in out
     assert "static 6" in out
-    assert "preview_slip 4 8 (128, 96) RGB I;16" in out
+    assert "preview_slip 4 8 (128, 96) RGB RGB" in out
     assert "preview_static 6 L" in out
 
 

@@ -79,7 +79,7 @@ def test_loader_reads_rgb_and_refuses_depth_in_one_line(rgb_only: Path, built: P
 
 
 def test_to_hf_holds_rgb_only(rgb_only: Path, tmp_path: Path) -> None:
-    hf = vtsbench.load(rgb_only).static.to_hf(cache_dir=tmp_path / "hf")
+    hf = vtsbench.load(rgb_only).static.to_hf(copy=True, cache_dir=tmp_path / "hf")
     assert hf.num_rows == 6 and "rgb" in hf.column_names
     assert "depth" not in hf.column_names and "contact" not in hf.column_names
 

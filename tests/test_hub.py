@@ -154,8 +154,8 @@ def test_streaming(hub_dataset: Path, offline: None) -> None:
 
 def test_rgb_only_dataset_exports(tmp_path: Path, offline: None) -> None:
     import datasets
-
     from loader_conftest import SIZE
+
     from vtsbench.dataset.build import BuildOptions, build
     from vtsbench.dataset.hub import export_hf
     from vtsbench.sim.simulate import simulate

@@ -140,3 +140,54 @@ def test_torch_view_pickles_small(ds: VtsDataset) -> None:
     tv[0]
     back = pickle.loads(pickle.dumps(tv))
     torch.testing.assert_close(back[0][0], tv[0][0])
+
+
+def test_joint_transforms_keep_rgb_depth_contact_aligned(vts_dataset: Path) -> None:
+    """A flip through `transforms` moves the input and the spatial targets together."""
+    from torchvision.transforms import v2
+
+    from vtsbench.dataset.torch_dataset import HorizontalFlip
+    from vtsbench.labels import MIRROR_X
+
+    ds = vtsbench.load(vts_dataset)
+    flips = (("slip", v2.RandomHorizontalFlip(p=1.0)), ("static", v2.RandomVerticalFlip(p=1.0)))
+    for kind, flip in flips:
+        axis = -1 if isinstance(flip, v2.RandomHorizontalFlip) else -2
+        data = ds.view(kind).to_torch("rgbd", targets=("depth", "contact"), transforms=flip)
+        x, t = data[1]
+        s = ds.view(kind)[1]
+        assert type(x) is torch.Tensor and type(t["depth"]) is torch.Tensor
+        rgb = np.flip(s["rgb"], axis - 1)
+        np.testing.assert_allclose(x[..., :3, :, :].numpy() * 255,
+                                   np.moveaxis(rgb, -1, -3), atol=1e-3)
+        np.testing.assert_array_equal(x[..., 3, :, :].numpy(), np.flip(s["depth"], axis))
+        np.testing.assert_array_equal(t["depth"].numpy(), np.flip(s["depth"], axis))
+        np.testing.assert_array_equal(t["contact"].numpy(), np.flip(s["contact"], axis))
+        assert t["contact"].any()  # a flip of an empty mask would prove nothing
+    # the project's own flip also mirrors the slip labels
+    slip = ds.slip.where(state="slip")
+    data = slip.to_torch("rgb", targets=("contact",), transforms=HorizontalFlip(p=1.0))
+    x, t = data[0]
+    s = slip[0]
+    assert t["direction"] == MIRROR_X[s["direction"]]
+    assert t["motion_mm"][0] == -np.float32(s["motion_mm"][0])
+    np.testing.assert_array_equal(t["contact"].numpy(), np.flip(s["contact"], -1))
+
+
+def test_target_transform_classes_and_plot(vts_dataset: Path) -> None:
+    ds = vtsbench.load(vts_dataset)
+    data = ds.slip.to_torch("rgb", frames=2, targets=("depth", "contact"),
+                            target_transform=lambda t: t["state_idx"])
+    x, y = data[0]
+    assert y == ds.slip[0]["state_idx"] and tuple(x.shape[:2]) == (2, 3)
+    assert data.classes == ["static", "press", "slip"]
+    assert ds.static.to_torch().classes == ds.info.objects
+    assert data.class_names["direction"][2] == "up"
+    full = ds.slip.to_torch("rgb", targets=("depth", "contact"))
+    fig = full.plot(full[0])
+    assert len(fig.axes) == 4  # rgb, depth, its colour bar, contact
+    assert ds.slip[0]["sample_id"] in fig.texts[0].get_text()
+    fig = ds.static.plot(ds.static[0])
+    assert len(fig.axes) == 4 and ds.static[0]["object"] in fig.texts[0].get_text()
+    depth_only = ds.static.to_torch("depth")
+    assert len(depth_only.plot(depth_only[0]).axes) == 2
