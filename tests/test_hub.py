@@ -100,12 +100,12 @@ def _check_rows(rows: list[dict], ds: vtsbench.VtsDataset, kind: str) -> None:
     view = ds.view(kind)
     for r in rows:
         s = view.by_id(r["sample_id"])
-        rgb = (np.stack([np.asarray(im) for im in r["rgb"]]) if kind == "slip"
-               else np.asarray(r["rgb"]))
+        rgb, contact = (np.stack([np.asarray(im) for im in r[n]]) if kind == "slip"
+                        else np.asarray(r[n]) for n in ("rgb", "contact"))
         assert rgb.dtype == np.uint8 and np.array_equal(rgb, s["rgb"])
         depth = np.asarray(r["depth"], dtype=np.float32)
         assert np.array_equal(depth, s["depth"])  # lossless: the loader's float32 mm
-        assert np.array_equal(np.asarray(r["contact"]), s["contact"])
+        assert contact.dtype == bool and np.array_equal(contact, s["contact"])
         assert r["object"] == s["class_idx"]
         preview = r["depth_preview"]
         frames = preview if kind == "slip" else [preview]
@@ -136,7 +136,9 @@ def test_load_dataset_every_config(hub_dataset: Path, tmp_path: Path, offline: N
                                   cache_dir=str(tmp_path))
     _check_rows(list(whole), ds, "slip")  # every slip sample, pixel for pixel
     rows = whole.with_format("numpy")
-    assert rows[0]["depth"].dtype == np.float32 and rows[0]["contact"].dtype == bool
+    s = ds.slip.by_id(rows[0]["sample_id"])
+    for name, dtype in (("rgb", np.uint8), ("depth", np.float32), ("contact", bool)):
+        assert rows[0][name].dtype == dtype and np.array_equal(rows[0][name], s[name])
 
 
 def test_streaming(hub_dataset: Path, offline: None) -> None:

@@ -312,7 +312,8 @@ def _hub_section(info: DatasetInfo, hub: HubLayout) -> str:
     depth = f"""\
 `depth` is float32 **millimetres** of indentation into the gel (positive into the gel): the
 stored int16 counts x {info.depth_scale_mm}, exactly what `vtsbench.load` returns; `contact`
-is a bool mask of the same shape; `depth_preview` is the depth colour-mapped for viewing
+is the contact mask as 1-bit PNG images (bool in numpy); `depth_preview` is the depth
+colour-mapped for viewing
 (viridis, from 0 to the sample's maximum or 0.05 mm, whichever is larger).""" if (
         info.has_depth) else "This dataset has no depth: `rgb` and the labels only."
     return f"""## Hugging Face datasets
@@ -332,7 +333,7 @@ import datasets
 train = datasets.load_dataset("path/to/this/folder", "{first}", split="{first_split}")
 stream = datasets.load_dataset("path/to/this/folder", "{first}", split="{first_split}",
                                streaming=True)
-row = next(iter(stream))  # row["rgb"]: PIL images; row["depth"]: mm
+row = next(iter(stream.with_format("numpy")))  # rgb uint8, depth float32 mm, contact bool
 names = train.features["object"].names
 ```
 
