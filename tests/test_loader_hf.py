@@ -82,3 +82,20 @@ def test_xarray_reads_depth_in_mm(vts_dataset: Path) -> None:
         np.testing.assert_array_equal(np.rint(depth * 1000), np.rint(ref * 1000.0))
         np.testing.assert_allclose(depth, ref, rtol=0, atol=1e-7)
         assert np.array_equal(x["rgb"].values, ds.view(kind).read(slice(None))["rgb"])
+
+
+def test_format_1_0_datasets_still_load(dataset_copy: Path) -> None:
+    """Format 1.1 changed only the depth's Zarr attributes (scale -> CF scale_factor): a 1.0
+    dataset loads and verifies as before (the loader takes the scale from info.json)."""
+    import json
+
+    from vtsbench.dataset.verify import verify
+
+    info = dataset_copy / "meta" / "info.json"
+    doc = json.loads(info.read_text())
+    assert doc["format_version"] == "1.1"
+    doc["format_version"] = "1.0"
+    info.write_text(json.dumps(doc))
+    ds = vtsbench.load(dataset_copy)
+    assert ds.info.format_version == "1.0" and ds.slip[0]["depth"].dtype == np.float32
+    assert verify(dataset_copy, decode=False).ok

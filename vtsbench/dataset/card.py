@@ -35,7 +35,7 @@ def preview_rows(n: int, k: int) -> list[int]:
     return sorted({round(float(x)) for x in np.linspace(0, n - 1, min(n, k))})
 
 
-def _png(img: np.ndarray, png_filter: str) -> bytes:
+def _png(img: np.ndarray, png_filter: str, huffman: bool = True) -> bytes:
     """PNG bytes of an RGB uint8, grey uint8 or grey uint16 image (fixed settings).
 
     Level 1 with one fixed row filter instead of libpng's per-row choice among all five, which
@@ -50,7 +50,8 @@ def _png(img: np.ndarray, png_filter: str) -> bytes:
     params = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_FILTER, filters[png_filter]]
     if img.ndim == 3:
         img = cv2.cvtColor(img, cv2.COLOR_RGB2BGR)
-        params += [cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
+        if huffman:  # huffman=False: LZ too, for smooth RGB (a colour-mapped depth)
+            params += [cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
     ok, buf = cv2.imencode(".png", img, params)
     if not ok:
         raise ValueError("cannot encode PNG")

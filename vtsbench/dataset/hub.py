@@ -73,24 +73,13 @@ def size_category(n: int) -> str:
 
 
 def png(img: np.ndarray, smooth: bool = False) -> bytes:
-    """PNG bytes of an RGB or grey uint8 image, fixed settings (level 1, one row filter).
+    """PNG bytes of an RGB or grey uint8 image, fixed settings (level 1, one row filter; see
+    card._png for the measurements): sensor frames Huffman only with the sub filter (their
+    noise defeats LZ matching); smooth=True (colour-mapped depth) LZ with the up filter, which
+    shrinks large flat areas to almost nothing."""
+    from .card import _png
 
-    RGB sensor frames: Huffman only with the sub filter (their noise defeats LZ matching; see
-    card._png for the measurements); smooth=True (colour-mapped depth, masks): LZ with the up
-    filter, which shrinks large flat areas to almost nothing.
-    """
-    import cv2
-
-    params = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_FILTER,
-              cv2.IMWRITE_PNG_FILTER_UP if smooth else cv2.IMWRITE_PNG_FILTER_SUB]
-    if img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_RGB2BGR)
-        if not smooth:
-            params += [cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
-    ok, buf = cv2.imencode(".png", img, params)
-    if not ok:
-        raise ValueError("cannot encode PNG")
-    return buf.tobytes()
+    return _png(img, "up" if smooth else "sub", huffman=not smooth)
 
 
 def depth_range_mm(depth_mm: np.ndarray) -> float:
