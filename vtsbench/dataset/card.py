@@ -305,9 +305,10 @@ def _hub_section(info: DatasetInfo, hub: HubLayout) -> str:
     """The card's section on the parquet copy under hf/ and its configs."""
     from .hub import HUB_DIR, default_config
 
+    n_rows = {f.path: f.rows for fs in hub.files.values() for f in fs}
     rows = "\n".join(f"| `{name}` | {hub.kinds[name]} | "
-                     f"{', '.join(f'{s} ({len(fs)} files)' for s, fs in splits.items())} |"
-                     for name, splits in hub.configs.items())
+                     f"{', '.join(f'{s} {sum(n_rows[p] for p in fs)}' for s, fs in splits.items())}"
+                     " |" for name, splits in hub.configs.items())
     first = default_config(hub) or ""
     first_split = next(iter(hub.configs.get(first, {"train": []})), "train")
     depth = f"""\
@@ -325,7 +326,7 @@ frames as lossless PNG images (a list of {info.frames_per_sequence} for a slip s
 to exactly the stored uint8 pixels; `object`, `state` and `direction` are `ClassLabel`s with the
 project's names. {depth}
 
-| config | kind | splits |
+| config | kind | samples per split |
 |---|---|---|
 {rows}
 

@@ -56,8 +56,9 @@ def config_name(kind: str, scheme: str) -> str:
 
 
 def split_name(part: str) -> str:
-    """The `datasets` split of a part: val -> validation; train, test, foldK unchanged."""
-    return SPLIT_NAMES.get(part, part)
+    """The `datasets` split of a part: val -> validation; train, test, foldK unchanged; any
+    character datasets refuses in a split name (not a letter, digit or _) becomes _."""
+    return re.sub(r"\W", "_", SPLIT_NAMES.get(part, part), flags=re.ASCII)
 
 
 def size_category(n: int) -> str:
