@@ -207,6 +207,12 @@ def build(
     shard_mb: Annotated[float, typer.Option(
         help="Target uncompressed RGB shard size in MB (whole samples per shard).")] = 32.0,
     quiet: Annotated[bool, typer.Option(help="No progress bars.")] = False,
+    holdout_objects: Annotated[Path | None, typer.Option(
+        help="File of object names, one a line: adds the split scheme given_objects, test = "
+             "exactly these objects, val = other whole objects.")] = None,
+    split_file: Annotated[list[Path] | None, typer.Option(
+        help="A split scheme of your own (JSON in schemas/split.schema.json); repeatable.")
+    ] = None,
 ) -> None:
     """Build an RGB-D dataset (Zarr + parquet index + splits + card) from a recordings folder
     (RGB only with --no-depth).
@@ -225,7 +231,8 @@ def build(
                         frames=frames, workers=workers,
                         scheduler=scheduler, skip_bad=skip_bad, overwrite=overwrite,
                         version=version, compression_level=compression_level, seed=seed,
-                        shard_mb=shard_mb, progress=not quiet)
+                        shard_mb=shard_mb, progress=not quiet,
+                        holdout_objects=holdout_objects, split_files=tuple(split_file or ()))
     res = _run(run_build, recordings, out, opts, log=lambda m: console.print(m, soft_wrap=True))
     _print_build(res)
 
@@ -318,6 +325,9 @@ def calibrate(
     width: Annotated[int | None, typer.Option(help="mlp: units per hidden layer (32).")] = None,
     depth: Annotated[int | None, typer.Option(help="mlp: hidden layers (3).")] = None,
     epochs: Annotated[int | None, typer.Option(help="mlp: training epochs (40).")] = None,
+    circles: Annotated[str, typer.Option(
+        help="label: use labelled circles, detect the others; detect: detect every circle "
+             "(labels only compared, in report.json).")] = "label",
 ) -> None:
     """Fit a colour-to-gradient calibration from ball presses, score held-out presses.
 
@@ -347,7 +357,8 @@ def calibrate(
                             estimate_background=estimate_background, solver=solver,
                             device=device, options={k: v for k, v in given.items()
                                                     if v is not None},
-                            log=lambda m: typer.echo(m, err=m.startswith("warning")))
+                            log=lambda m: typer.echo(m, err=m.startswith("warning")),
+                            circles=circles)
         save_calibration(run.calibration, out)
         folder = report if report is not None else out.with_name(out.name + ".report")
         png, _ = write_report(run, folder)
@@ -360,11 +371,21 @@ def calibrate(
                        f"{e['peak_depth_error_mm']:+.4f} mm ({r.reference})")
         if run.held_out:
             m = fit["holdout_mean"]
+
+            def mm(k: str, sign: str = "") -> str:
+                v = m.get(k)
+                return "n/a" if v is None else f"{v:{sign}.4f} mm"
+
             typer.echo(f"held-out mean over {len(run.held_out)} presses: plane-aligned RMSE "
-                       f"{m['plane_aligned_rmse_mm']:.4f} mm, gradient RMSE "
+                       f"{mm('plane_aligned_rmse_mm')}, contact RMSE {mm('contact_rmse_mm')}, "
+                       f"peak error {mm('peak_depth_error_mm', '+')}, gradient RMSE "
                        f"{m['gradient_rmse']:.4f}")
+        caveat = "".join(
+            f"; {len(ids)} press(es) {what} ({', '.join(ids[:8])}{', ...' if len(ids) > 8 else ''}"
+            f", see report.json)" for ids, what in ((run.dropped, "dropped"),
+                                                    (run.doubted, "doubted")) if ids)
         typer.echo(f"wrote {out} ({method}, {run.calibration.n_presses} training presses) and "
-                   f"{png} in {time.perf_counter() - t0:.1f} s")
+                   f"{png} in {time.perf_counter() - t0:.1f} s{caveat}")
 
     _run(work)
 

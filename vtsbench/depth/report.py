@@ -55,6 +55,7 @@ def summary(run: CalibrationRun) -> dict[str, Any]:
             "n_presses": cal.n_presses, "seconds": round(run.seconds, 2),
             "train_gradient_rmse": cal.fit.get("train_gradient_rmse"),
             "holdout_mean": cal.fit.get("holdout_mean", {}), "presses": rows,
+            "circles": run.presses, "dropped": run.dropped, "doubted": run.doubted,
             "warnings": run.warnings}
 
 
