@@ -392,9 +392,9 @@ def check_scale(scale: tuple[float, float], ball_radius_mm: float, shape: tuple[
     elif ball > math.hypot(h, w):
         why = f"makes the {ball_radius_mm:g} mm ball {ball:.0f} px in radius, beyond the " \
               f"{h}x{w} image"
-    elif radii_px and max(radii_px) > RADIUS_TOLERANCE * ball:
-        why = (f"makes the {ball_radius_mm:g} mm ball {ball:.1f} px in radius, but labelled "
-               f"circles reach {max(radii_px):g} px")
+    elif radii_px and float(np.median(radii_px)) > RADIUS_TOLERANCE * ball:
+        why = (f"makes the {ball_radius_mm:g} mm ball {ball:.1f} px in radius, but half the "
+               f"labelled circles are larger than {float(np.median(radii_px)):g} px")
     elif radii_px and max(radii_px) < 0.1 * ball:
         why = (f"makes the {ball_radius_mm:g} mm ball {ball:.0f} px in radius, but no labelled "
                f"circle is larger than {max(radii_px):g} px")
@@ -631,7 +631,7 @@ def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = 
         raise VtsError(f"--holdout must be >= 0, got {k}")
     if n < MIN_TRAIN + k:
         lost = setup["lost"]
-        why = f" ({len(lost)} of {setup['n_entries']} dropped for no visible contact or an " \
+        why = f" ({len(lost)} of {setup['n_entries']} without visible contact or with an " \
               f"implausible circle: {', '.join(lost)})" if lost else ""
         raise VtsError(f"too few presses: {n} usable{why}; need at least {MIN_TRAIN + k} "
                        f"({MIN_TRAIN} to train plus --holdout {k})", setup["root"])

@@ -1,0 +1,229 @@
+"""Recordings from other labs: circle self-checks, scale errors, given splits, extra columns."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from tests.conftest import real_dir
+from tests.test_calibration_data import copy_folder, replace, sim_folder
+from tests.test_splits import synth
+from vtsbench.cli import app
+from vtsbench.dataset.given_splits import (
+    given_objects_split,
+    read_object_list,
+    read_split_file,
+)
+from vtsbench.dataset.schema import extra_column_name, index_schema_of
+from vtsbench.dataset.splits import leak_check
+from vtsbench.depth.calibration import calibrate
+from vtsbench.depth.sphere import circle_doubts, detect_circle
+from vtsbench.errors import VtsError
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return sim_folder(tmp_path_factory)
+
+
+# -- circles ----------------------------------------------------------------------------------
+
+
+def _press(h: int = 96, w: int = 128, x: float = 60, y: float = 50, r: float = 14
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """A flat grey background and a press: a ring of colour change around (x, y)."""
+    bg = np.full((h, w, 3), 120, np.uint8)
+    yy, xx = np.mgrid[:h, :w]
+    d = np.hypot(xx - x, yy - y)
+    ring = np.clip(1 - np.abs(d - 0.8 * r) / (0.5 * r), 0, 1) * 60
+    img = bg.astype(np.float32)
+    img[..., 0] += ring
+    img[..., 2] -= ring * 0.5
+    return bg, np.clip(img, 0, 255).astype(np.uint8)
+
+
+def test_a_good_circle_has_no_doubts_and_bad_ones_say_why() -> None:
+    bg, img = _press()
+    found = detect_circle(img, bg)
+    assert found is not None
+    assert circle_doubts(found, img, bg, ball_px=30) == []
+    assert circle_doubts((60, 50, 14), img, bg, ball_px=30) == []
+    tiny = circle_doubts((60, 50, 3), img, bg, ball_px=30)
+    assert any("colour change covers" in d for d in tiny)
+    off = circle_doubts((115, 85, 10), img, bg, ball_px=30)
+    assert any("centre off the imprint" in d for d in off)
+    assert any("larger than the ball" in d for d in circle_doubts((60, 50, 14), img, bg, 8))
+    assert circle_doubts((60, 50, 14), bg, bg, 30)[-1] == "no visible colour change"
+    assert "not a circle" in circle_doubts((np.nan, 50, 14), img, bg, 30)[0]
+
+
+def test_report_lists_every_press_and_doubted_labels(sim, tmp_path) -> None:
+    from vtsbench.recordings.manifest import Circle
+
+    # press 2's label is far from its imprint: doubted and said so, but used as labelled
+    folder = copy_folder(sim, tmp_path / "f", edit=lambda e, s: (
+        [e[0], replace(e[1], circle=Circle(5.0, 5.0, 6.0)), *e[2:]], s))
+    out = tmp_path / "c.safetensors"
+    res = CliRunner().invoke(app, ["calibrate", str(folder), "--out", str(out), "--method",
+                                   "lut", "--holdout", "2", "--bins", "16", "--cells", "1"])
+    assert res.exit_code == 0, res.output
+    assert "press(es) doubted (press-00002" in res.stdout
+    assert "contact RMSE" in res.stdout and "peak error" in res.stdout
+    js = json.loads((Path(str(out) + ".report") / "report.json").read_text())
+    rows = {p["id"]: p for p in js["circles"]}
+    assert len(rows) == 10 and js["doubted"] == ["press-00002"] and js["dropped"] == []
+    assert rows["press-00002"]["status"] == "doubted" and rows["press-00002"]["reasons"]
+    assert all(p["source"] == "label" and p["circle"] for p in rows.values())
+
+
+def test_detect_mode_compares_with_labels(sim) -> None:
+    run = calibrate(sim, method="lut", holdout=2, circles="detect",
+                    options={"bins": 16, "cells": 1})
+    assert {p["source"] for p in run.presses} == {"detected"}
+    for p in run.presses:
+        lab, det = p["label"], p["detected"]
+        assert abs(det["r"] - lab["r"]) < 0.1 * lab["r"]
+        assert np.hypot(det["x"] - lab["x"], det["y"] - lab["y"]) < 3
+    with pytest.raises(VtsError, match="--circles must be"):
+        calibrate(sim, method="lut", circles="guess")
+
+
+@pytest.mark.parametrize("scale, match", [
+    (19.58, r"looks like px per mm: did you mean --mm-per-px 0\.051"),
+    (1e-6, "beyond the"),
+    (float("inf"), "must be positive"),
+])
+def test_scale_contradicting_the_ball_is_one_line(sim, scale, match) -> None:
+    with pytest.raises(VtsError, match=match) as ei:
+        calibrate(sim, method="lut", mm_per_px=scale)
+    assert "\n" not in str(ei.value)
+
+
+def test_scale_contradicting_the_labels(sim, tmp_path) -> None:
+    from vtsbench.recordings.manifest import Circle
+
+    folder = copy_folder(sim, tmp_path / "f", edit=lambda e, s: (
+        [replace(x, circle=Circle(60.0, 50.0, 0.5)) for x in e], s))
+    with pytest.raises(VtsError, match="no labelled circle is larger than 0.5 px"):
+        calibrate(folder, method="lut")
+    res = CliRunner().invoke(app, ["calibrate", str(sim), "--out", str(tmp_path / "x"),
+                                   "--mm-per-px", "19.58"])
+    assert res.exit_code == 2 and "Traceback" not in res.output
+    assert res.output.count("\n") == 1 and "did you mean" in res.output
+
+
+# -- given splits -----------------------------------------------------------------------------
+
+
+def test_given_objects_holds_out_exactly_the_list(tmp_path) -> None:
+    ss = synth()
+    sp = given_objects_split(ss, ["obj03", "obj07"], seed=1)
+    objs = {s.sample_id: s.object for s in ss}
+    assert {objs[i] for i in sp.parts["test"]} == {"obj03", "obj07"}
+    assert len(sp.parts["test"]) == sum(s.object in ("obj03", "obj07") for s in ss
+                                        if s.kind == "slip")
+    val = {objs[i] for i in sp.parts["val"]}
+    assert len(val) == 1 and not val & {"obj03", "obj07"}
+    assert leak_check(sp, ss) == []
+    assert given_objects_split(ss, ["obj03", "obj07"], seed=1).to_bytes() == sp.to_bytes()
+    with pytest.raises(VtsError, match="first 'OBJ03'.*differs in case"):
+        given_objects_split(ss, ["OBJ03"])
+    with pytest.raises(VtsError, match="every object"):
+        given_objects_split(ss, sorted({s.object for s in ss}))
+
+
+def test_object_list_and_split_file_are_read_strictly(tmp_path) -> None:
+    f = tmp_path / "objs.txt"
+    f.write_text("# test objects\nobj01\n\n obj02 \n")
+    assert read_object_list(f) == ["obj01", "obj02"]
+    f.write_text("obj01\nobj01\n")
+    with pytest.raises(VtsError, match="listed twice"):
+        read_object_list(f)
+    f.write_text("# nothing\n")
+    with pytest.raises(VtsError, match="lists no object"):
+        read_object_list(f)
+    sp = given_objects_split(synth(), ["obj01"])
+    doc = sp.to_dict() | {"name": "lab_split"}
+    g = tmp_path / "split.json"
+    g.write_text(json.dumps(doc))
+    assert read_split_file(g).parts == sp.parts
+    g.write_text(json.dumps(doc | {"name": "seen"}))
+    with pytest.raises(VtsError, match="built-in"):
+        read_split_file(g)
+    g.write_text(json.dumps(doc | {"parts": {"test": [1]}}))
+    with pytest.raises(VtsError, match="not a split file"):
+        read_split_file(g)
+    g.write_text('{"seed": NaN}')
+    with pytest.raises(VtsError, match="NaN"):
+        read_split_file(g)
+
+
+# -- extra index columns ----------------------------------------------------------------------
+
+
+def test_extra_column_names() -> None:
+    assert extra_column_name("camera") == "camera"
+    assert extra_column_name("Exp Num") == "exp_num"
+    assert extra_column_name("object") == "meta_object"
+    assert extra_column_name("0cam") == "meta_0cam"
+    assert extra_column_name("<>") is None
+
+
+def test_build_keeps_fields_and_takes_given_splits(tmp_path) -> None:
+    import pyarrow.parquet as pq
+
+    from tests.conftest import write_video
+    from vtsbench.dataset.loader import load
+
+    src = tmp_path / "src"
+    for split in ("train", "test"):
+        for obj in (["a", "b", "c", "d"] if split == "train" else ["e", "f"]):
+            for take in (0, 1):
+                for cam in (0, 1):
+                    d = src / f"base_data_for_{split}" / obj / f"exp_num_{take}"
+                    d.mkdir(parents=True, exist_ok=True)
+                    write_video(d / f"camera_{cam}.avi", 8, 24, 32)
+    rec = tmp_path / "rec"
+    r = CliRunner().invoke(app, [
+        "manifest", str(src), "--pattern",
+        "base_data_for_{split}/{object}/exp_num_{take}/camera_{camera}.avi", "--out", str(rec)])
+    assert r.exit_code == 0, r.output
+    (tmp_path / "objs.txt").write_text("e\nf\n")
+    ds = tmp_path / "ds"
+    r = CliRunner().invoke(app, ["build", str(rec), str(ds), "--no-depth", "--quiet",
+                                 "--holdout-objects", str(tmp_path / "objs.txt")])
+    assert r.exit_code == 0, r.output
+    table = pq.read_table(ds / "index" / "slip.parquet")
+    assert {"camera", "take", "split"} <= set(table.column_names)
+    assert index_schema_of(table.schema, "slip") is not None
+    data = load(ds)
+    assert len(data.slip.where(camera="0")) == 12
+    assert set(data.slip.where(split="test").index.column("object").to_pylist()) == \
+        {"e", "f"}
+    test = data.slip.split("given_objects", "test")
+    assert set(test.index.column("object").to_pylist()) == {"e", "f"}
+    r = CliRunner().invoke(app, ["verify", str(ds), "--quick"])
+    assert r.exit_code == 0, r.output
+    (tmp_path / "bad.txt").write_text("e\nzz\n")
+    r = CliRunner().invoke(app, ["build", str(rec), str(tmp_path / "ds2"), "--no-depth",
+                                 "--quiet", "--holdout-objects", str(tmp_path / "bad.txt")])
+    assert r.exit_code == 2 and "'zz'" in r.output and "Traceback" not in r.output
+
+
+# -- real presses (skip when ../shared/data/real is absent) -----------------------------------
+
+
+def test_real_taxim_detected_circles_are_checked(tmp_path) -> None:
+    from vtsbench.depth.calibration import taxim_recordings
+
+    npz = real_dir("taxim_gelsight_ball") / "dataPack_small.npz"
+    rec = taxim_recordings(npz, tmp_path / "taxim")
+    run = calibrate(rec, method="lut", circles="detect", options={"bins": 16, "cells": 2})
+    # one detection (6 px for a 17 px label) is implausible and reported, not used
+    assert run.dropped == ["press-037"]
+    assert any("implausible detected circle" in w for w in run.warnings)
+    assert len(run.presses) == 49
