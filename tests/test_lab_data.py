@@ -227,3 +227,76 @@ def test_real_taxim_detected_circles_are_checked(tmp_path) -> None:
     assert run.dropped == ["press-037"]
     assert any("implausible detected circle" in w for w in run.warnings)
     assert len(run.presses) == 49
+
+
+# -- labels from beside the files -------------------------------------------------------------
+
+
+def _videos(root: Path) -> None:
+    from tests.conftest import write_video
+
+    for obj in ("cup", "pen"):
+        for take in (0, 1):
+            d = root / obj / f"take{take}"
+            d.mkdir(parents=True)
+            write_video(d / "clip.avi", 12, 24, 32)
+    (root / "cup" / "take1" / "slip.txt").write_text("")
+
+
+def test_labels_csv_per_file_folder_and_range(tmp_path) -> None:
+    from vtsbench.recordings.manifest import load_manifest
+
+    src = tmp_path / "src"
+    _videos(src)
+    csv_path = tmp_path / "labels.csv"
+    csv_path.write_text(
+        "file,start,stop,state,direction,grip\n"
+        "pen,,,press,,soft\n"                        # a folder: everything in it
+        "cup/take0/clip.avi,,,static,,\n"              # one file
+        "cup/take0/clip.avi,4,8,slip,2,\n"             # a frame range: one window
+        "cup/nowhere.avi,,,slip,,\n")                  # matches nothing
+    out = tmp_path / "rec"
+    r = CliRunner().invoke(app, [
+        "manifest", str(src), "--pattern", "{object}/{take}/clip.avi", "--window", "4",
+        "--labels", str(csv_path), "--marker", "slip.txt:state=slip", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "row 5 (cup/nowhere.avi) matches no entry" in r.output
+    m = load_manifest(out)
+    by = {e.id: e for e in m.entries}
+    assert by["cup-take0-clip-w000"].labels.state == "static"
+    assert by["cup-take0-clip-w001"].labels.state == "slip"
+    assert by["cup-take0-clip-w001"].labels.direction == 2
+    assert by["cup-take1-clip-w002"].labels.state == "slip"          # from the marker
+    assert by["pen-take0-clip-w000"].labels.state == "press"
+    assert by["pen-take1-clip-w000"].meta["grip"] == "soft"
+    r = CliRunner().invoke(app, ["check", str(out), "--labels", str(csv_path)])
+    assert r.exit_code == 1 and "row 5 (cup/nowhere.avi) matches no entry" in r.output
+
+
+@pytest.mark.parametrize("text, match", [
+    ("name,state\nx.avi,flying\n", "state 'flying'"),
+    ("file,direction\nx.avi,9\n", "direction '9'"),
+    ("file,press_depth_mm\nx.avi,nan\n", "not a finite depth"),
+    ("file,start,stop,state\nx.avi,5,,slip\n", "both start and stop"),
+    ("file,state\n../x.avi,slip\n", "inside the recordings"),
+    ("state\nslip\n", "no file column"),
+    ("file,state\nx.avi,slip,extra\n", "more cells than columns"),
+    ("file,state\n" + "a" * 5000 + ",slip\n", "not a readable CSV"),
+])
+def test_hostile_labels_csv_is_one_line(tmp_path, text, match) -> None:
+    from vtsbench.recordings.labels_file import read_labels
+
+    f = tmp_path / "l.csv"
+    f.write_text(text)
+    with pytest.raises(VtsError, match=match) as ei:
+        read_labels(f)
+    assert "\n" not in str(ei.value)
+
+
+def test_marker_syntax() -> None:
+    from vtsbench.recordings.labels_file import Marker
+
+    assert Marker.parse("!slip.txt:state=press") == Marker("slip.txt", "state", "press", True)
+    for bad in ("slip.txt", "slip.txt:state", "a/b.txt:state=slip", "x:state=flying"):
+        with pytest.raises(VtsError):
+            Marker.parse(bad)

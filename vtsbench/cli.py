@@ -100,6 +100,9 @@ def check(
     folder: Annotated[Path, typer.Argument(help="Recordings folder (with recordings.json).")],
     deep: Annotated[bool, typer.Option(help="Decode every frame of every video (slow).")] = False,
     workers: Annotated[int, typer.Option(min=1, help="Threads reading media.")] = 2,
+    labels: Annotated[Path | None, typer.Option(
+        help="Labels CSV given to `vtsbench manifest --labels`: list its rows that match no "
+             "entry.")] = None,
 ) -> None:
     """Validate a recordings folder and list every problem; exit 1 if there is any.
 
@@ -110,7 +113,7 @@ def check(
 
     from .recordings.check import check_folder
 
-    report = _run(check_folder, folder, deep=deep, workers=workers)
+    report = _run(check_folder, folder, deep=deep, workers=workers, labels=labels)
     _report(report.problems, report.warnings,
             f"{report.n_entries} entries, {report.n_frames} frames checked: "
             f"{len(report.problems)} problem(s), {len(report.warnings)} warning(s)")
@@ -148,6 +151,14 @@ def manifest(
     out: Annotated[Path | None, typer.Option(
         help="Write recordings.json into this folder instead (for read-only data); paths in it "
              "point back to FOLDER.")] = None,
+    labels: Annotated[Path | None, typer.Option(
+        help="CSV of labels: a file column (file|path|folder, relative to FOLDER; a folder "
+             "labels everything in it), optional start,stop frames, and state, direction, "
+             "press_depth_mm, object, take or any other column (kept as a field).")] = None,
+    marker: Annotated[list[str] | None, typer.Option(
+        help="FILE:FIELD=VALUE: entries with FILE in their folder (or a folder above) get the "
+             "label, e.g. slip.txt:state=slip; '!FILE:...' when FILE is absent. Repeatable.")
+    ] = None,
 ) -> None:
     """Write recordings.json for a folder of existing files, matched by a file-name pattern.
 
@@ -158,7 +169,8 @@ def manifest(
     opts = ManifestOptions(pattern=pattern, kind=kind, sensor=sensor, session=session,
                            mm_per_px=mm_per_px, fps=fps, background=background,
                            ball_radius_mm=ball_radius_mm, circles=circles, window=window,
-                           stride=stride, force=force, out=out)
+                           stride=stride, force=force, out=out, labels=labels,
+                           markers=tuple(marker or ()))
     m, path = _run(write_pattern_manifest, folder, opts)
     typer.echo(f"wrote {path}: {len(m.entries)} entries in {len(m.sessions)} session(s)")
 
@@ -380,6 +392,12 @@ def calibrate(
                        f"{mm('plane_aligned_rmse_mm')}, contact RMSE {mm('contact_rmse_mm')}, "
                        f"peak error {mm('peak_depth_error_mm', '+')}, gradient RMSE "
                        f"{m['gradient_rmse']:.4f}")
+            parts = [f"{s} {mm(s + '_contact_rmse_mm')}, {mm(s + '_peak_depth_error_mm', '+')}, "
+                     f"{mm(s + '_min_depth_mm', '+')}, {mm(s + '_border_abs_mm')}"
+                     for s in ("dct", "dst", "masked")]
+            typer.echo("  by solver (contact RMSE, peak error, lowest depth, mean |depth| on the "
+                       "border): " + "; ".join(parts)
+                       + " (masked: zero outside the contact, for absolute depth)")
         caveat = "".join(
             f"; {len(ids)} press(es) {what} ({', '.join(ids[:8])}{', ...' if len(ids) > 8 else ''}"
             f", see report.json)" for ids, what in ((run.dropped, "dropped"),

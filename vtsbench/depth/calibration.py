@@ -43,6 +43,10 @@ CAP_SAMPLES = 4000
 FLAT_SAMPLES = 1500
 #: Default Gaussian blur (px) of the colour difference before the mapping (sensor noise).
 BLUR_PX = 1.0
+#: The solvers every held-out press is scored with, and the figures kept for each.
+SOLVERS = ("dct", "dst", "masked")
+SOLVER_KEYS = ("plane_aligned_rmse_mm", "contact_rmse_mm", "peak_depth_error_mm", "min_depth_mm",
+               "negative_share", "border_abs_mm")
 SCHEMA_PATH = Path(__file__).resolve().parent.parent / "schemas" / "calibration.schema.json"
 
 
@@ -344,6 +348,8 @@ class HeldOut:
     pred_depth: np.ndarray
     region: np.ndarray
     held_out: bool = True
+    #: The errors and artefacts of every solver (dct, dst, masked) on this press.
+    by_solver: dict[str, dict[str, float]] = field(default_factory=dict)
 
 
 @dataclass
@@ -591,15 +597,35 @@ def evaluate_press(cal: Calibration, press: Press, *, solver: str = "dct",
     g = cal.gradients(press.image)
     e = np.hypot(g[..., 0] - f.p, g[..., 1] - f.q)[f.trusted]
     grad_rmse = float(np.sqrt(np.mean(e**2))) if e.size else math.nan
-    pred = integrate(g[..., 0], g[..., 1], method=solver, mm_per_px=cal.mm_per_px)
     if press.truth is not None:
         t = read_truth(press.truth)
         true, region, ref = t.depth_mm[0], t.contact[0], "truth"
     else:
         true, region, ref = f.depth_mm, f.contact, "sphere"
-    errs = depth_errors(pred, true, region).to_dict()
-    errs = {"gradient_rmse": grad_rmse, **errs}
-    return HeldOut(press, errs, ref, true, pred, region, held_out)
+    preds, by_solver = {}, {}
+    for s in SOLVERS:
+        # masked: zero outside the press's contact, as the paper integrates
+        preds[s] = integrate(g[..., 0], g[..., 1], method=s, mm_per_px=cal.mm_per_px,
+                             mask=region if s == "masked" else None)
+        by_solver[s] = {**depth_errors(preds[s], true, region).to_dict(),
+                        **artefacts(preds[s])}
+    errs = {"gradient_rmse": grad_rmse, **by_solver[solver]}
+    return HeldOut(press, errs, ref, true, preds[solver], region, held_out, by_solver)
+
+
+#: Width (px) of the frame border whose mean |depth| measures border streaks.
+BORDER_PX = 2
+
+
+def artefacts(depth: np.ndarray) -> dict[str, float]:
+    """Negative depth (the lowest value, mm; and the share of pixels below -0.02 mm) and border
+    streaks (mean |depth| over the outermost BORDER_PX pixels, mm) of one depth map."""
+    b = BORDER_PX
+    edge = np.concatenate([depth[:b].ravel(), depth[-b:].ravel(), depth[b:-b, :b].ravel(),
+                           depth[b:-b, -b:].ravel()])
+    return {"min_depth_mm": float(depth.min()),
+            "negative_share": float((depth < -0.02).mean()),
+            "border_abs_mm": float(np.abs(edge).mean())}
 
 
 def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = None,
@@ -685,6 +711,10 @@ def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = 
         "holdout_mean": {kk: _num(float(np.mean([r.errors[kk] for r in results])))
                          for kk in keys} if results else {},
     }
+    if results:  # every solver's absolute error and artefacts, side by side
+        cal.fit["holdout_mean"].update({
+            f"{s}_{kk}": _num(float(np.mean([r.by_solver[s][kk] for r in results])))
+            for s in SOLVERS for kk in SOLVER_KEYS})
     examples = [] if results else [evaluate_press(cal, p, solver=solver, held_out=False)
                                    for p in train[:3]]
     return CalibrationRun(cal, results, warnings, time.perf_counter() - t0, examples,

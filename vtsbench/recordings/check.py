@@ -38,7 +38,7 @@ class _Media:
 
 
 def check_folder(folder: str | Path, deep: bool = False, workers: int = 2,
-                 decode: bool = True) -> CheckReport:
+                 decode: bool = True, labels: Path | None = None) -> CheckReport:
     """Check a recordings folder: schema, references, media, frame ranges, sizes and labels.
 
     decode=False (what `vtsbench build` screens with): PNG frames are sized from their headers
@@ -62,7 +62,30 @@ def check_folder(folder: str | Path, deep: bool = False, workers: int = 2,
     _check_sessions(folder, m, media, report)
     for e in m.entries:
         _check_entry(folder, m, e, media, report)
+    if labels is not None:
+        _check_label_file(m, Path(labels), report)
     return report
+
+
+def _check_label_file(m: Manifest, labels: Path, report: CheckReport) -> None:
+    """A problem for every row of a labels CSV that matches no entry (its path compared with
+    the end of each entry's source path, its frame range with the entry's frames)."""
+    from .labels_file import entry_frames, read_labels, row_matches
+
+    try:
+        rows = read_labels(labels)
+    except VtsError as e:
+        report.problems.append(str(e))
+        return
+    srcs = []
+    for e in m.entries:
+        parts = e.source.path.replace("\\", "/").split("/")
+        srcs.append(([("/".join(parts[i:])) for i in range(len(parts))], entry_frames(e)))
+    for row in rows:
+        if not any(row_matches(row, rel, *fr) for tails, fr in srcs for rel in tails):
+            rng = "" if row.start is None else f" frames {row.start}-{row.stop}"
+            report.problems.append(f"{labels}: row {row.line} ({row.path}{rng}) matches no "
+                                   "entry")
 
 
 def _check_ids(m: Manifest, report: CheckReport) -> None:
