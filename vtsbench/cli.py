@@ -8,6 +8,10 @@ from typing import Annotated
 
 import typer
 
+from .cli_help import install as _install_help
+
+_install_help()
+
 app = typer.Typer(
     name="vtsbench",
     help="Benchmark toolkit for visuo-tactile sensing: recordings -> calibrated RGB-D datasets "
@@ -113,7 +117,8 @@ def check(
 
     from .recordings.check import check_folder
 
-    report = _run(check_folder, folder, deep=deep, workers=workers, labels=labels)
+    report = _run(check_folder, folder, deep=deep, workers=workers, labels=labels,
+                  progress=True)
     _report(report.problems, report.warnings,
             f"{report.n_entries} entries, {report.n_frames} frames checked: "
             f"{len(report.problems)} problem(s), {len(report.warnings)} warning(s)")

@@ -168,7 +168,7 @@ def sha256_file(path: Path) -> str:
 
 
 def screen_entries(root: Path, manifest: Manifest, frames: int,
-                   workers: int = 2) -> tuple[dict[str, str], list[str]]:
+                   workers: int = 2, progress: bool = False) -> tuple[dict[str, str], list[str]]:
     """Bad sample entries (id -> reason) found cheaply up front, and warnings.
 
     Reuses `vtsbench check` (files present and decodable at the ends of each range, sizes,
@@ -180,7 +180,8 @@ def screen_entries(root: Path, manifest: Manifest, frames: int,
     """
     from ..recordings.check import check_folder
 
-    report = check_folder(root, deep=False, workers=max(1, workers), decode=False)
+    report = check_folder(root, deep=False, workers=max(1, workers), decode=False,
+                          progress=progress)
     kinds = {e.id: e.kind for e in manifest.entries}
     per: dict[str, list[str]] = {}
     warnings = list(report.warnings)
@@ -813,6 +814,10 @@ def _progress(enabled: bool) -> Any:
 
     if not enabled:
         return nullcontext(None)
+    from ..progress import LineProgress, is_terminal
+
+    if not is_terminal():  # a log or a pipe: lines, since a live bar shows nothing until the end
+        return LineProgress()
     from rich.console import Console
     from rich.progress import (
         BarColumn,
@@ -920,7 +925,8 @@ def build(recordings: str | Path, out: str | Path, opts: BuildOptions | None = N
                 if opts.workers > 1 and not opts.scheduler else None)
         manifest = load_manifest(root)
         cal_path = resolve_calibration(root, opts.calibration) if opts.depth else None
-        bad, warnings = screen_entries(root, manifest, opts.frames, max(2, opts.workers))
+        bad, warnings = screen_entries(root, manifest, opts.frames, max(2, opts.workers),
+                                       opts.progress)
         used = {e.session for e in manifest.entries if e.kind != "press" and e.id not in bad}
         if cal_path is not None:
             cal = _load_checked_calibration(cal_path, manifest, used)

@@ -38,12 +38,14 @@ class _Media:
 
 
 def check_folder(folder: str | Path, deep: bool = False, workers: int = 2,
-                 decode: bool = True, labels: Path | None = None) -> CheckReport:
+                 decode: bool = True, labels: Path | None = None,
+                 progress: bool = False) -> CheckReport:
     """Check a recordings folder: schema, references, media, frame ranges, sizes and labels.
 
     decode=False (what `vtsbench build` screens with): PNG frames are sized from their headers
     instead of decoded, since the build decodes them anyway and reports a frame that does not
-    decode; other images and the video frames are decoded as without it."""
+    decode; other images and the video frames are decoded as without it. progress: lines on
+    stderr while the media are opened, when stderr is not a terminal."""
     folder = Path(folder)
     report = CheckReport()
     try:
@@ -58,7 +60,7 @@ def check_folder(folder: str | Path, deep: bool = False, workers: int = 2,
     m = Manifest.from_dict(doc)
     report.n_entries = len(m.entries)
     _check_ids(m, report)
-    media = _open_media(folder, m, deep, workers, decode)
+    media = _open_media(folder, m, deep, workers, decode, progress)
     _check_sessions(folder, m, media, report)
     for e in m.entries:
         _check_entry(folder, m, e, media, report)
@@ -114,8 +116,10 @@ def _frames_needed(m: Manifest) -> dict[str, set[int]]:
 
 
 def _open_media(folder: Path, m: Manifest, deep: bool, workers: int,
-                decode: bool = True) -> dict[str, _Media]:
+                decode: bool = True, progress: bool = False) -> dict[str, _Media]:
     """Probe every referenced source once (in threads: OpenCV releases the GIL)."""
+    from ..progress import LineProgress, is_terminal
+
     need = _frames_needed(m)
 
     def one(rel: str) -> tuple[str, _Media]:
@@ -130,8 +134,15 @@ def _open_media(folder: Path, m: Manifest, deep: bool, workers: int,
             out.probe, out.bad_frames = _video_frames(path, out.probe, sorted(need[rel]), deep)
         return rel, out
 
+    lines = LineProgress() if progress and not is_terminal() else None
+    task = None if lines is None else lines.add_task("checking sources", total=len(need))
+    out: dict[str, _Media] = {}
     with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
-        return dict(pool.map(one, sorted(need)))
+        for rel, media in pool.map(one, sorted(need)):
+            out[rel] = media
+            if lines is not None and task is not None:
+                lines.advance(task)
+    return out
 
 
 def _video_frames(path: Path, pr: Probe, frames: list[int], deep: bool
