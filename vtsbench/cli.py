@@ -415,25 +415,36 @@ def calibrate(
 
 @app.command()
 def depth(
-    images: Annotated[Path, typer.Argument(
-        help="An image file, a folder of images or a video.")],
+    images: Annotated[list[str], typer.Argument(
+        help="Images, folders of images, videos or globs such as 'takes/*.mp4' (quoted).")],
     calibration: Annotated[Path, typer.Option(help="Calibration file from `vtsbench calibrate`.")],
     solver: Annotated[str, typer.Option(help="Poisson solver: dct, dst or masked.")] = "dct",
     out: Annotated[Path, typer.Option(
-        "--out", help="Output folder for <name>.npy (float32 mm) and <name>.png.")
+        "--out", help="Output folder for <name>.npy (float32 mm) and <name>.png; with several "
+                      "inputs, a folder's or video's maps go to OUT/<its name>/.")
     ] = Path("depth"),
     device: Annotated[str, typer.Option(
         help="auto (CUDA when present, else numpy), cpu or cuda (torch), numpy.")] = "auto",
     batch: Annotated[int, typer.Option(min=1, help="Frames per step.")] = 8,
+    range_: Annotated[str | None, typer.Option(
+        "--range", help="Fixed colour scale of the PNGs, MIN,MAX in mm (e.g. -0.2,1.5), the "
+                        "same for every frame (default: each frame's own; negative depth is "
+                        "drawn in red).")] = None,
 ) -> None:
     """Reconstruct depth (mm) from tactile images with a calibration.
 
-    Example: [bold]vtsbench depth frames/ --calibration sensor.safetensors --out depth/[/]
+    Example: [bold]vtsbench depth frames/ 'takes/*.mp4' --calibration sensor.safetensors
+    --out depth/ --range -0.2,1.5[/]
     """
-    from .depth.reconstruct import depth_folder
+    from .depth.reconstruct import depth_paths, parse_range
 
-    n = _run(depth_folder, images, calibration, out, solver=solver,
-             device=None if device == "numpy" else device, batch=batch)
+    def work() -> int:
+        return depth_paths(images, calibration, out, solver=solver,
+                           device=None if device == "numpy" else device, batch=batch,
+                           value_range=parse_range(range_),
+                           log=lambda m: typer.echo(m, err=True))
+
+    n = _run(work)
     typer.echo(f"wrote {n} depth map(s) to {out}")
 
 
