@@ -108,7 +108,7 @@ def test_scale_contradicting_the_labels(sim, tmp_path) -> None:
 
     folder = copy_folder(sim, tmp_path / "f", edit=lambda e, s: (
         [replace(x, circle=Circle(60.0, 50.0, 0.5)) for x in e], s))
-    with pytest.raises(VtsError, match="no labelled circle is larger than 0.5 px"):
+    with pytest.raises(VtsError, match=r"no labelled circle is larger than 0\.5 px"):
         calibrate(folder, method="lut")
     res = CliRunner().invoke(app, ["calibrate", str(sim), "--out", str(tmp_path / "x"),
                                    "--mm-per-px", "19.58"])
@@ -130,7 +130,7 @@ def test_given_objects_holds_out_exactly_the_list(tmp_path) -> None:
     assert len(val) == 1 and not val & {"obj03", "obj07"}
     assert leak_check(sp, ss) == []
     assert given_objects_split(ss, ["obj03", "obj07"], seed=1).to_bytes() == sp.to_bytes()
-    with pytest.raises(VtsError, match="first 'OBJ03'.*differs in case"):
+    with pytest.raises(VtsError, match=r"first 'OBJ03'.*differs in case"):
         given_objects_split(ss, ["OBJ03"])
     with pytest.raises(VtsError, match="every object"):
         given_objects_split(ss, sorted({s.object for s in ss}))
@@ -300,3 +300,44 @@ def test_marker_syntax() -> None:
     for bad in ("slip.txt", "slip.txt:state", "a/b.txt:state=slip", "x:state=flying"):
         with pytest.raises(VtsError):
             Marker.parse(bad)
+
+
+# -- long commands and --help -----------------------------------------------------------------
+
+
+def test_progress_lines_when_not_a_terminal() -> None:
+    import io
+
+    from vtsbench.progress import LineProgress, is_terminal
+
+    buf = io.StringIO()
+    assert not is_terminal(buf)
+    with LineProgress(stream=buf, every_s=0.0) as bar:
+        t = bar.add_task("frames", total=4)
+        for _ in range(4):
+            bar.advance(t)
+    lines = buf.getvalue().splitlines()
+    assert lines[0].startswith("frames: 1/4 (25 %)") and lines[-1].startswith("frames: 4/4")
+
+
+def test_check_prints_progress_lines(make_recordings, capsys) -> None:
+    from vtsbench.recordings.check import check_folder
+
+    root, _ = make_recordings()
+    assert check_folder(root, progress=True).ok
+    assert "checking sources: " in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("width", ["50", "80", "140"])
+def test_help_never_cuts_an_option(width, monkeypatch) -> None:
+    monkeypatch.setenv("COLUMNS", width)
+    for cmd in ("build", "calibrate", "manifest", "depth", "check"):
+        res = CliRunner().invoke(app, [cmd, "--help"], terminal_width=int(width))
+        assert res.exit_code == 0, res.output
+        assert "…" not in res.output, (cmd, width)
+        # an option name folds onto the next line at a narrow width: read the column joined
+        rows = [ln.strip("│ ").split()[0] for ln in res.output.splitlines()
+                if ln.strip("│ ").startswith("-")]
+        flat = "".join(rows) + "".join(res.output.split())
+        assert "--holdout-objects" in flat or cmd != "build"
+        assert "--range" in flat or cmd != "depth"
