@@ -223,10 +223,29 @@ def test_real_taxim_detected_circles_are_checked(tmp_path) -> None:
     npz = real_dir("taxim_gelsight_ball") / "dataPack_small.npz"
     rec = taxim_recordings(npz, tmp_path / "taxim")
     run = calibrate(rec, method="lut", circles="detect", options={"bins": 16, "cells": 2})
-    # one detection (6 px for a 17 px label) is implausible and reported, not used
-    assert run.dropped == ["press-037"]
-    assert any("implausible detected circle" in w for w in run.warnings)
-    assert len(run.presses) == 49
+    # every press has contact and none is dropped; press-037's first detection (6 px for a
+    # 17 px label) fails its check, and the retry from the imprint lands on the label
+    assert run.dropped == [] and len(run.presses) == 49
+    rows = {p["id"]: p for p in run.presses}
+    p37 = rows["press-037"]
+    assert "colour change covers" in p37["retried_after"][0]
+    lab, det = p37["label"], p37["detected"]
+    assert np.hypot(det["x"] - lab["x"], det["y"] - lab["y"]) < 3
+    assert abs(det["r"] - lab["r"]) < 0.1 * lab["r"]
+
+
+def test_real_digit_drops_only_the_frames_without_contact(tmp_path) -> None:
+    folder = real_dir("digit_ball_6mm")
+    rec = tmp_path / "digit"
+    r = CliRunner().invoke(app, ["manifest", str(folder), "--pattern", "{name}.png", "--kind",
+                                 "press", "--ball-radius-mm", "3", "--circles",
+                                 str(folder / "sphere.csv"), "--out", str(rec)])
+    assert r.exit_code == 0, r.output
+    run = calibrate(rec, method="lut", circles="detect", mm_per_px=1 / 21.09,
+                    estimate_background=True, options={"bins": 16, "cells": 2})
+    assert run.dropped == ["0016", "0017"]
+    p8 = next(p for p in run.presses if p["id"] == "0008")
+    assert p8["status"] == "used" and p8["retried_after"]
 
 
 # -- labels from beside the files -------------------------------------------------------------

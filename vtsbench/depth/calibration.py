@@ -461,6 +461,21 @@ def _resolve_background(root: Path, sessions: list[Any], frames: list[np.ndarray
     return bg, how
 
 
+def _retry_detection(img: np.ndarray, bg: np.ndarray, ball_px: float
+                     ) -> tuple[float, float, float] | None:
+    """A second detection started from the changed region's centre and size; kept only when it
+    passes the check that the first one failed."""
+    from .sphere import change_support
+
+    sup = change_support(img, bg)
+    if sup is None:
+        return None
+    found = detect_circle(img, bg, start=(sup[0], sup[1], 0.8 * sup[2]))
+    if found is None or circle_doubts(found, img, bg, ball_px):
+        return None
+    return found
+
+
 def _circle(c: tuple[float, float, float] | None) -> dict[str, float | None] | None:
     return None if c is None else {"x": _num(c[0]), "y": _num(c[1]), "r": _num(c[2])}
 
@@ -533,6 +548,15 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
         row: dict[str, Any] = {"id": e.id, "source": source, "label": _circle(label),
                                "detected": _circle(found), "circle": _circle(use)}
         doubts = [] if use is None else circle_doubts(use, img, bg, ball)
+        if source == "detected" and use is not None and doubts:
+            # retry from the imprint as the colour change shows it (the strongest change can be
+            # a small saturated patch beside the contact); a frame without contact is not
+            # retried: the noise would give some circle
+            again = _retry_detection(img, bg, ball)
+            if again is not None:
+                row.update(detected=_circle(again), circle=_circle(again),
+                           retried_after=doubts, first_detected=_circle(use))
+                use, found, doubts = again, again, []
         if use is None:
             row.update(status="dropped", reasons=["no visible contact: no circle detected"])
         elif doubts and source == "detected":

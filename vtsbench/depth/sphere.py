@@ -181,14 +181,17 @@ def _ray_peaks(m: np.ndarray, cx: float, cy: float, r_max: float, sigma: float,
 
 
 def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | None = None,
-                  min_radius_px: float = 3.0) -> tuple[float, float, float] | None:
+                  min_radius_px: float = 3.0,
+                  start: tuple[float, float, float] | None = None
+                  ) -> tuple[float, float, float] | None:
     """The contact circle (x, y, r) px of a ball press, or None when no contact is visible.
 
     Blur the change to the background, keep what stands clearly above the noise (6 robust
     standard deviations and a fifth of the strongest change), take the convex hull of the
     largest connected component (the flat top of the cap barely changes colour), then fit a
     circle to the peak of the change along rays from its centroid, twice, dropping rays more
-    than 2.5 robust deviations off the circle.
+    than 2.5 robust deviations off the circle. start: a first guess (x, y, r) instead of the
+    component (what calibration retries with when the first circle fails its check).
     """
     import cv2
 
@@ -196,6 +199,8 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     if sigma is None:
         sigma = max(1.0, min(h, w) / 240)
     m = change_map(image, background, sigma)
+    if start is not None:
+        return _fit_rays(m, *start, sigma, min_radius_px)
     med = float(np.median(m))
     mad = float(np.median(np.abs(m - med))) * 1.4826 + 1e-3
     peak = float(np.percentile(m, 99.99))
@@ -214,8 +219,15 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     cv2.fillConvexPoly(comp, cv2.convexHull(pts), 1)
     area = int(comp.sum())
     ys, xs = np.nonzero(comp)
-    cx, cy = float(xs.mean()), float(ys.mean())
-    r0 = math.sqrt(area / math.pi)
+    return _fit_rays(m, float(xs.mean()), float(ys.mean()), math.sqrt(area / math.pi), sigma,
+                     min_radius_px)
+
+
+def _fit_rays(m: np.ndarray, cx: float, cy: float, r0: float, sigma: float,
+              min_radius_px: float) -> tuple[float, float, float] | None:
+    """Fit the circle to the edges found along rays from (cx, cy), three times (see
+    detect_circle)."""
+    h, w = m.shape
     r = r0
     for _ in range(3):
         px, py = _ray_peaks(m, cx, cy, 1.5 * max(r0, r), sigma)
