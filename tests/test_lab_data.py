@@ -225,7 +225,7 @@ def test_real_taxim_detected_circles_are_checked(tmp_path) -> None:
     run = calibrate(rec, method="lut", circles="detect", options={"bins": 16, "cells": 2})
     # every press has contact and none is dropped; press-037's first detection (6 px for a
     # 17 px label) fails its check, and the retry from the imprint lands on the label
-    assert run.dropped == [] and len(run.presses) == 49
+    assert run.dropped == [] and run.retried == ["press-037"] and len(run.presses) == 49
     rows = {p["id"]: p for p in run.presses}
     p37 = rows["press-037"]
     assert "colour change covers" in p37["retried_after"][0]

@@ -406,7 +406,9 @@ def calibrate(
         caveat = "".join(
             f"; {len(ids)} press(es) {what} ({', '.join(ids[:8])}{', ...' if len(ids) > 8 else ''}"
             f", see report.json)" for ids, what in ((run.dropped, "dropped"),
-                                                    (run.doubted, "doubted")) if ids)
+                                                    (run.doubted, "doubted"),
+                                                    (run.retried, "with a circle detected again"))
+            if ids)
         typer.echo(f"wrote {out} ({method}, {run.calibration.n_presses} training presses) and "
                    f"{png} in {time.perf_counter() - t0:.1f} s{caveat}")
 

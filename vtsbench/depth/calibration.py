@@ -373,6 +373,11 @@ class CalibrationRun:
         return [p["id"] for p in self.presses if p["status"] == "doubted"]
 
     @property
+    def retried(self) -> list[str]:
+        """Presses whose first detected circle failed its check and was detected again."""
+        return [p["id"] for p in self.presses if p.get("retried_after")]
+
+    @property
     def shown(self) -> list[HeldOut]:
         """The presses a report shows: the held-out ones, else a few training presses."""
         return self.held_out or self.train_examples
@@ -556,6 +561,9 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
             if again is not None:
                 row.update(detected=_circle(again), circle=_circle(again),
                            retried_after=doubts, first_detected=_circle(use))
+                warnings.append(f"press {e.id}: first detected circle implausible "
+                                f"({'; '.join(doubts)}); detected again from the imprint: "
+                                f"({again[0]:.1f}, {again[1]:.1f}) r {again[2]:.1f} px")
                 use, found, doubts = again, again, []
         if use is None:
             row.update(status="dropped", reasons=["no visible contact: no circle detected"])

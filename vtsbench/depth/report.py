@@ -58,6 +58,7 @@ def summary(run: CalibrationRun) -> dict[str, Any]:
             "train_gradient_rmse": cal.fit.get("train_gradient_rmse"),
             "holdout_mean": cal.fit.get("holdout_mean", {}), "presses": rows,
             "circles": run.presses, "dropped": run.dropped, "doubted": run.doubted,
+            "retried": run.retried,
             "warnings": run.warnings}
 
 
