@@ -175,7 +175,7 @@ def manifest(
                            mm_per_px=mm_per_px, fps=fps, background=background,
                            ball_radius_mm=ball_radius_mm, circles=circles, window=window,
                            stride=stride, force=force, out=out, labels=labels,
-                           markers=tuple(marker or ()))
+                           markers=tuple(marker or ()), progress=True)
     m, path = _run(write_pattern_manifest, folder, opts)
     typer.echo(f"wrote {path}: {len(m.entries)} entries in {len(m.sessions)} session(s)")
 

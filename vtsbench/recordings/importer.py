@@ -43,6 +43,7 @@ class ManifestOptions:
     out: Path | None = None  # where recordings.json goes (default: the folder itself)
     labels: Path | None = None  # CSV of labels per file, folder or frame range
     markers: tuple[str, ...] = ()  # FILE:FIELD=VALUE, a label from a marker file's presence
+    progress: bool = False  # lines on stderr while probing the files, when not a terminal
 
 
 def compile_pattern(pattern: str) -> re.Pattern[str]:
@@ -177,9 +178,15 @@ def build_pattern_manifest(folder: Path, opts: ManifestOptions,
     rels: list[str] = []
     short: list[str] = []
     session_probe: dict[str, tuple[int, int, float | None]] = {}
+    from ..progress import LineProgress, is_terminal
+
+    lines = LineProgress() if opts.progress and not is_terminal() else None
+    task = lines.add_task("reading files", total=len(matches)) if lines is not None else 0
     for rel, fields in matches:
         path = folder / rel
         pr = probe(path)
+        if lines is not None:
+            lines.advance(task)
         kind = opts.kind or ("static" if pr.kind == "image" else "sequence")
         if kind == "sequence" and pr.kind == "image":
             raise VtsError("a sequence needs a video or an image folder", path)
