@@ -11,7 +11,13 @@ import pytest
 from typer.testing import CliRunner
 
 from tests.conftest import real_dir
-from tests.test_calibration_data import copy_folder, fitted, replace, sim_folder
+from tests.test_calibration_data import (
+    copy_folder,
+    digit_recordings,
+    fitted,
+    replace,
+    sim_folder,
+)
 from vtsbench.cli import app
 from vtsbench.depth.calibration import (
     FORMAT_VERSION,
@@ -297,12 +303,7 @@ def test_taxim_gelsight_presses(tmp_path) -> None:
 
 @pytest.mark.real
 def test_digit_presses_say_what_they_lack_then_calibrate(tmp_path) -> None:
-    src = real_dir("digit_ball_6mm")
-    rec = tmp_path / "digit"
-    res = CliRunner().invoke(app, ["manifest", str(src), "--pattern", "{name}.png", "--kind",
-                                   "press", "--ball-radius-mm", "3", "--circles",
-                                   str(src / "sphere.csv"), "--out", str(rec)])
-    assert res.exit_code == 0, res.output
+    rec = digit_recordings(tmp_path / "digit")
     out = tmp_path / "digit.safetensors"
     base = ["calibrate", str(rec), "--out", str(out), "--method", "poly"]
     res = CliRunner().invoke(app, base)

@@ -10,7 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from tests.conftest import real_dir
-from tests.test_calibration_data import copy_folder, replace, sim_folder
+from tests.test_calibration_data import copy_folder, digit_recordings, replace, sim_folder
 from tests.test_splits import synth
 from vtsbench.cli import app
 from vtsbench.dataset.given_splits import (
@@ -217,6 +217,7 @@ def test_build_keeps_fields_and_takes_given_splits(tmp_path) -> None:
 # -- real presses (skip when ../shared/data/real is absent) -----------------------------------
 
 
+@pytest.mark.real
 def test_real_taxim_detected_circles_are_checked(tmp_path) -> None:
     from vtsbench.depth.calibration import taxim_recordings
 
@@ -234,13 +235,9 @@ def test_real_taxim_detected_circles_are_checked(tmp_path) -> None:
     assert abs(det["r"] - lab["r"]) < 0.1 * lab["r"]
 
 
+@pytest.mark.real
 def test_real_digit_drops_only_the_frames_without_contact(tmp_path) -> None:
-    folder = real_dir("digit_ball_6mm")
-    rec = tmp_path / "digit"
-    r = CliRunner().invoke(app, ["manifest", str(folder), "--pattern", "{name}.png", "--kind",
-                                 "press", "--ball-radius-mm", "3", "--circles",
-                                 str(folder / "sphere.csv"), "--out", str(rec)])
-    assert r.exit_code == 0, r.output
+    rec = digit_recordings(tmp_path / "digit")
     run = calibrate(rec, method="lut", circles="detect", mm_per_px=1 / 21.09,
                     estimate_background=True, options={"bins": 16, "cells": 2})
     assert run.dropped == ["0016", "0017"]
