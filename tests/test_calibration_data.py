@@ -61,3 +61,19 @@ def copy_folder(src: Path, dst: Path, **changes: Any) -> Path:
 def replace(obj: Any, **kw: Any) -> Any:
     """dataclasses.replace, short."""
     return dataclasses.replace(obj, **kw)
+
+
+def digit_recordings(out: Path) -> Path:
+    """A recordings folder (manifest only, written to out) for the real DIGIT presses with
+    their labelled circles, made by `vtsbench manifest` as a user would; skips when absent."""
+    from typer.testing import CliRunner
+
+    from tests.conftest import real_dir
+    from vtsbench.cli import app
+
+    src = real_dir("digit_ball_6mm")
+    res = CliRunner().invoke(app, ["manifest", str(src), "--pattern", "{name}.png", "--kind",
+                                   "press", "--ball-radius-mm", "3", "--circles",
+                                   str(src / "sphere.csv"), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    return out

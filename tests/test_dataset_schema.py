@@ -81,7 +81,8 @@ def test_state_idx_is_filled_and_checked() -> None:
     (lambda d: d.update(direction=8), "direction"),
     (lambda d: d.update(mm_per_px_x=0.0), "mm_per_px_x"),
     (lambda d: d.update(mm_per_px_x=None), "mm_per_px_y"),  # both known, or neither
-    (lambda d: d.update(colour="red"), "colour"),
+    (lambda d: d.update(colour=3), "colour"),  # a recording's own field is a string
+    (lambda d: d.update({"Bad Name": "x"}), "Bad Name"),
 ])
 def test_index_row_schema_rejects(mutate, needle) -> None:
     d = slip_meta().to_dict()

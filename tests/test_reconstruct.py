@@ -108,11 +108,31 @@ def test_torch_path_matches_numpy(run) -> None:
                                atol=2e-4)
 
 
-def test_colourise() -> None:
+def test_colourise_shows_negative_depth() -> None:
     d = np.linspace(-0.1, 1, 200, dtype=np.float32).reshape(10, 20)
     rgb = colourise(d)
     assert rgb.shape == (10, 20, 3) and rgb.dtype == np.uint8
-    np.testing.assert_array_equal(rgb[0, 0], colourise(np.zeros((1, 1)))[0, 0])
+    zero = colourise(np.zeros((1, 1)))[0, 0]
+    assert abs(int(rgb[0, 0, 0]) - int(zero[0])) > 100  # -0.1 mm is red, not 0's violet
+    # a fixed range: the same value, the same colour, whatever else is in the frame
+    a = colourise(np.array([[0.5, 2.0]]), vmax=1.0, vmin=-0.2)
+    b = colourise(np.array([[0.5, 0.0]]), vmax=1.0, vmin=-0.2)
+    np.testing.assert_array_equal(a[0, 0], b[0, 0])
+    with pytest.raises(VtsError, match="MIN < 0 < MAX"):
+        colourise(d, vmax=1.0, vmin=0.5)
+
+
+def test_colour_bar_and_range() -> None:
+    from vtsbench.depth.reconstruct import parse_range, with_colour_bar
+
+    rgb = colourise(np.zeros((120, 160)), 1.0, -0.2)
+    out = with_colour_bar(rgb, 1.0, -0.2)
+    assert out.shape[0] == 120 and out.shape[1] > 160 + 20
+    np.testing.assert_array_equal(out[:, :160], rgb)
+    assert parse_range("-0.2,1.5") == (-0.2, 1.5)
+    for bad in ("1,2", "a,b", "-1", "nan,1", "-inf,1"):
+        with pytest.raises(VtsError, match="--range"):
+            parse_range(bad)
 
 
 # -- the command ------------------------------------------------------------------------------
@@ -144,6 +164,18 @@ def test_cli_depth_on_image_folder_and_video(run, cal_file, tmp_path) -> None:
             assert (out / f"{n}.png").read_bytes()[:4] == b"\x89PNG"
     z = np.load(tmp_path / "out-imgs" / "f1.npy")
     np.testing.assert_allclose(z, reconstruct(frames[1], run.calibration), atol=1e-6)
+    # several inputs and a glob, one fixed colour scale; progress lines per input
+    res = CliRunner().invoke(app, ["depth", str(tmp_path / "imgs" / "*.png"),
+                                   str(tmp_path / "take.avi"), "--calibration", str(cal_file),
+                                   "--out", str(tmp_path / "many"), "--device", "numpy",
+                                   "--range", "-0.2,1.5"])
+    assert res.exit_code == 0, res.output
+    assert "wrote 4 depth map(s)" in res.stdout and "depth: 3/3" in res.stderr
+    assert (tmp_path / "many" / "f0.npy").is_file()
+    assert (tmp_path / "many" / "take" / "take_00001.npy").is_file()
+    res = CliRunner().invoke(app, ["depth", str(tmp_path / "nothing" / "*.png"),
+                                   "--calibration", str(cal_file)])
+    assert res.exit_code == 2 and "matches no file" in res.stderr
 
 
 def test_cli_depth_refuses_another_resolution(cal_file, tmp_path) -> None:

@@ -8,6 +8,10 @@ from typing import Annotated
 
 import typer
 
+from .cli_help import install as _install_help
+
+_install_help()
+
 app = typer.Typer(
     name="vtsbench",
     help="Benchmark toolkit for visuo-tactile sensing: recordings -> calibrated RGB-D datasets "
@@ -100,6 +104,9 @@ def check(
     folder: Annotated[Path, typer.Argument(help="Recordings folder (with recordings.json).")],
     deep: Annotated[bool, typer.Option(help="Decode every frame of every video (slow).")] = False,
     workers: Annotated[int, typer.Option(min=1, help="Threads reading media.")] = 2,
+    labels: Annotated[Path | None, typer.Option(
+        help="Labels CSV given to `vtsbench manifest --labels`: list its rows that match no "
+             "entry.")] = None,
 ) -> None:
     """Validate a recordings folder and list every problem; exit 1 if there is any.
 
@@ -110,7 +117,8 @@ def check(
 
     from .recordings.check import check_folder
 
-    report = _run(check_folder, folder, deep=deep, workers=workers)
+    report = _run(check_folder, folder, deep=deep, workers=workers, labels=labels,
+                  progress=True)
     _report(report.problems, report.warnings,
             f"{report.n_entries} entries, {report.n_frames} frames checked: "
             f"{len(report.problems)} problem(s), {len(report.warnings)} warning(s)")
@@ -148,6 +156,14 @@ def manifest(
     out: Annotated[Path | None, typer.Option(
         help="Write recordings.json into this folder instead (for read-only data); paths in it "
              "point back to FOLDER.")] = None,
+    labels: Annotated[Path | None, typer.Option(
+        help="CSV of labels: a file column (file|path|folder, relative to FOLDER; a folder "
+             "labels everything in it), optional start,stop frames, and state, direction, "
+             "press_depth_mm, object, take or any other column (kept as a field).")] = None,
+    marker: Annotated[list[str] | None, typer.Option(
+        help="FILE:FIELD=VALUE: entries with FILE in their folder (or a folder above) get the "
+             "label, e.g. slip.txt:state=slip; '!FILE:...' when FILE is absent. Repeatable.")
+    ] = None,
 ) -> None:
     """Write recordings.json for a folder of existing files, matched by a file-name pattern.
 
@@ -158,7 +174,8 @@ def manifest(
     opts = ManifestOptions(pattern=pattern, kind=kind, sensor=sensor, session=session,
                            mm_per_px=mm_per_px, fps=fps, background=background,
                            ball_radius_mm=ball_radius_mm, circles=circles, window=window,
-                           stride=stride, force=force, out=out)
+                           stride=stride, force=force, out=out, labels=labels,
+                           markers=tuple(marker or ()), progress=True)
     m, path = _run(write_pattern_manifest, folder, opts)
     typer.echo(f"wrote {path}: {len(m.entries)} entries in {len(m.sessions)} session(s)")
 
@@ -207,6 +224,12 @@ def build(
     shard_mb: Annotated[float, typer.Option(
         help="Target uncompressed RGB shard size in MB (whole samples per shard).")] = 32.0,
     quiet: Annotated[bool, typer.Option(help="No progress bars.")] = False,
+    holdout_objects: Annotated[Path | None, typer.Option(
+        help="File of object names, one a line: adds the split scheme given_objects, test = "
+             "exactly these objects, val = other whole objects.")] = None,
+    split_file: Annotated[list[Path] | None, typer.Option(
+        help="A split scheme of your own (JSON in schemas/split.schema.json); repeatable.")
+    ] = None,
 ) -> None:
     """Build an RGB-D dataset (Zarr + parquet index + splits + card) from a recordings folder
     (RGB only with --no-depth).
@@ -225,7 +248,8 @@ def build(
                         frames=frames, workers=workers,
                         scheduler=scheduler, skip_bad=skip_bad, overwrite=overwrite,
                         version=version, compression_level=compression_level, seed=seed,
-                        shard_mb=shard_mb, progress=not quiet)
+                        shard_mb=shard_mb, progress=not quiet,
+                        holdout_objects=holdout_objects, split_files=tuple(split_file or ()))
     res = _run(run_build, recordings, out, opts, log=lambda m: console.print(m, soft_wrap=True))
     _print_build(res)
 
@@ -384,6 +408,9 @@ def calibrate(
     width: Annotated[int | None, typer.Option(help="mlp: units per hidden layer (32).")] = None,
     depth: Annotated[int | None, typer.Option(help="mlp: hidden layers (3).")] = None,
     epochs: Annotated[int | None, typer.Option(help="mlp: training epochs (40).")] = None,
+    circles: Annotated[str, typer.Option(
+        help="label: use labelled circles, detect the others; detect: detect every circle "
+             "(labels only compared, in report.json).")] = "label",
 ) -> None:
     """Fit a colour-to-gradient calibration from ball presses, score held-out presses.
 
@@ -413,7 +440,8 @@ def calibrate(
                             estimate_background=estimate_background, solver=solver,
                             device=device, options={k: v for k, v in given.items()
                                                     if v is not None},
-                            log=lambda m: typer.echo(m, err=m.startswith("warning")))
+                            log=lambda m: typer.echo(m, err=m.startswith("warning")),
+                            circles=circles)
         save_calibration(run.calibration, out)
         folder = report if report is not None else out.with_name(out.name + ".report")
         png, _ = write_report(run, folder)
@@ -426,36 +454,65 @@ def calibrate(
                        f"{e['peak_depth_error_mm']:+.4f} mm ({r.reference})")
         if run.held_out:
             m = fit["holdout_mean"]
+
+            def mm(k: str, sign: str = "") -> str:
+                v = m.get(k)
+                return "n/a" if v is None else f"{v:{sign}.4f} mm"
+
             typer.echo(f"held-out mean over {len(run.held_out)} presses: plane-aligned RMSE "
-                       f"{m['plane_aligned_rmse_mm']:.4f} mm, gradient RMSE "
+                       f"{mm('plane_aligned_rmse_mm')}, contact RMSE {mm('contact_rmse_mm')}, "
+                       f"peak error {mm('peak_depth_error_mm', '+')}, gradient RMSE "
                        f"{m['gradient_rmse']:.4f}")
+            parts = [f"{s} {mm(s + '_contact_rmse_mm')}, {mm(s + '_peak_depth_error_mm', '+')}, "
+                     f"{mm(s + '_min_depth_mm', '+')}, {mm(s + '_border_abs_mm')}"
+                     for s in ("dct", "dst", "masked")]
+            typer.echo("  by solver (contact RMSE, peak error, lowest depth, mean |depth| on the "
+                       "border): " + "; ".join(parts)
+                       + " (masked: zero outside the contact, for absolute depth)")
+        caveat = "".join(
+            f"; {len(ids)} press(es) {what} ({', '.join(ids[:8])}{', ...' if len(ids) > 8 else ''}"
+            f", see report.json)" for ids, what in ((run.dropped, "dropped"),
+                                                    (run.doubted, "doubted"),
+                                                    (run.retried, "with a circle detected again"))
+            if ids)
         typer.echo(f"wrote {out} ({method}, {run.calibration.n_presses} training presses) and "
-                   f"{png} in {time.perf_counter() - t0:.1f} s")
+                   f"{png} in {time.perf_counter() - t0:.1f} s{caveat}")
 
     _run(work)
 
 
 @app.command()
 def depth(
-    images: Annotated[Path, typer.Argument(
-        help="An image file, a folder of images or a video.")],
+    images: Annotated[list[str], typer.Argument(
+        help="Images, folders of images, videos or globs such as 'takes/*.mp4' (quoted).")],
     calibration: Annotated[Path, typer.Option(help="Calibration file from `vtsbench calibrate`.")],
     solver: Annotated[str, typer.Option(help="Poisson solver: dct, dst or masked.")] = "dct",
     out: Annotated[Path, typer.Option(
-        "--out", help="Output folder for <name>.npy (float32 mm) and <name>.png.")
+        "--out", help="Output folder for <name>.npy (float32 mm) and <name>.png; with several "
+                      "inputs, a folder's or video's maps go to OUT/<its name>/.")
     ] = Path("depth"),
     device: Annotated[str, typer.Option(
         help="auto (CUDA when present, else numpy), cpu or cuda (torch), numpy.")] = "auto",
     batch: Annotated[int, typer.Option(min=1, help="Frames per step.")] = 8,
+    range_: Annotated[str | None, typer.Option(
+        "--range", help="Fixed colour scale of the PNGs, MIN,MAX in mm (e.g. -0.2,1.5), the "
+                        "same for every frame (default: each frame's own; negative depth is "
+                        "drawn in red).")] = None,
 ) -> None:
     """Reconstruct depth (mm) from tactile images with a calibration.
 
-    Example: [bold]vtsbench depth frames/ --calibration sensor.safetensors --out depth/[/]
+    Example: [bold]vtsbench depth frames/ 'takes/*.mp4' --calibration sensor.safetensors
+    --out depth/ --range -0.2,1.5[/]
     """
-    from .depth.reconstruct import depth_folder
+    from .depth.reconstruct import depth_paths, parse_range
 
-    n = _run(depth_folder, images, calibration, out, solver=solver,
-             device=None if device == "numpy" else device, batch=batch)
+    def work() -> int:
+        return depth_paths(images, calibration, out, solver=solver,
+                           device=None if device == "numpy" else device, batch=batch,
+                           value_range=parse_range(range_),
+                           log=lambda m: typer.echo(m, err=True))
+
+    n = _run(work)
     typer.echo(f"wrote {n} depth map(s) to {out}")
 
 

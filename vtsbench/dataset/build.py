@@ -53,6 +53,10 @@ class BuildOptions:
     seed: int = 0
     shard_mb: float = 32.0
     progress: bool = False
+    #: --holdout-objects: a file of object names, one a line (split scheme given_objects).
+    holdout_objects: Path | None = None
+    #: --split-file: split schemes in schemas/split.schema.json given by the user.
+    split_files: tuple[Path, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -75,6 +79,8 @@ class Plan:
     layouts: dict[str, Layout]
     objects: list[str]
     bad: dict[str, str]
+    #: Extra index columns per kind (column -> a value per row): the entries' take and meta.
+    extras: dict[str, dict[str, list[str | None]]] = field(default_factory=dict)
 
     @property
     def samples(self) -> list[SampleMeta]:
@@ -162,7 +168,7 @@ def sha256_file(path: Path) -> str:
 
 
 def screen_entries(root: Path, manifest: Manifest, frames: int,
-                   workers: int = 2) -> tuple[dict[str, str], list[str]]:
+                   workers: int = 2, progress: bool = False) -> tuple[dict[str, str], list[str]]:
     """Bad sample entries (id -> reason) found cheaply up front, and warnings.
 
     Reuses `vtsbench check` (files present and decodable at the ends of each range, sizes,
@@ -174,7 +180,8 @@ def screen_entries(root: Path, manifest: Manifest, frames: int,
     """
     from ..recordings.check import check_folder
 
-    report = check_folder(root, deep=False, workers=max(1, workers), decode=False)
+    report = check_folder(root, deep=False, workers=max(1, workers), decode=False,
+                          progress=progress)
     kinds = {e.id: e.kind for e in manifest.entries}
     per: dict[str, list[str]] = {}
     warnings = list(report.warnings)
@@ -272,7 +279,31 @@ def make_plan(root: Path, manifest: Manifest, bad: dict[str, str], *, frames: in
                             arrays)
                for kind in KINDS}
     return Plan(metas, {k: [s for _, s in rows[k]] for k in KINDS}, layouts, objects,
-                dict(bad))
+                dict(bad), extra_columns(manifest, {k: [s for _, s in rows[k]] for k in KINDS}))
+
+
+def extra_columns(manifest: Manifest, sources: dict[str, list[SampleSource]]
+                  ) -> dict[str, dict[str, list[str | None]]]:
+    """The recordings' own fields as extra index columns per kind: an entry's `take` and every
+    key of its `meta` (pattern fields such as camera or split), as strings, None where absent."""
+    from .schema import extra_column_name
+
+    entries = {e.id: e for e in manifest.entries}
+    out: dict[str, dict[str, list[str | None]]] = {}
+    for kind, srcs in sources.items():
+        fields: list[dict[str, str]] = []
+        for src in srcs:
+            e = entries[src.entry_id]
+            got = {} if e.take is None else {"take": str(e.take)}
+            for k, v in sorted((e.meta or {}).items()):
+                name = extra_column_name(k)
+                if name is not None and v is not None:
+                    got.setdefault(name, v if isinstance(v, str) else
+                                   json.dumps(v, sort_keys=True, ensure_ascii=False))
+            fields.append(got)
+        names = sorted({n for f in fields for n in f})
+        out[kind] = {n: [f.get(n) for f in fields] for n in names}
+    return out
 
 
 # -- fingerprints ---------------------------------------------------------------------------
@@ -783,6 +814,10 @@ def _progress(enabled: bool) -> Any:
 
     if not enabled:
         return nullcontext(None)
+    from ..progress import LineProgress, is_terminal
+
+    if not is_terminal():  # a log or a pipe: lines, since a live bar shows nothing until the end
+        return LineProgress()
     from rich.console import Console
     from rich.progress import (
         BarColumn,
@@ -890,7 +925,8 @@ def build(recordings: str | Path, out: str | Path, opts: BuildOptions | None = N
                 if opts.workers > 1 and not opts.scheduler else None)
         manifest = load_manifest(root)
         cal_path = resolve_calibration(root, opts.calibration) if opts.depth else None
-        bad, warnings = screen_entries(root, manifest, opts.frames, max(2, opts.workers))
+        bad, warnings = screen_entries(root, manifest, opts.frames, max(2, opts.workers),
+                                       opts.progress)
         used = {e.session for e in manifest.entries if e.kind != "press" and e.id not in bad}
         if cal_path is not None:
             cal = _load_checked_calibration(cal_path, manifest, used)
@@ -917,6 +953,7 @@ def build(recordings: str | Path, out: str | Path, opts: BuildOptions | None = N
                 raise VtsError("nothing to build: no usable static or sequence entries "
                                "(calibration presses are not samples)", root)
             splits = _splits(plan, opts.seed)  # leaks fail the build before the long part
+            _given_splits(splits, plan, opts)
             remove_stale(stage, plan)
             tasks = shard_tasks(plan, root, stage, cal_path, cal_sha, opts.solver)
             todo = [t for t in tasks if not shard_done(t)]
@@ -956,6 +993,23 @@ def _bad_error(bad: dict[str, str]) -> VtsError:
     more = (f" (and {len(bad) - 1} more bad entries)" if len(bad) > 1 else "")
     return VtsError(f"bad recording {eid}: {bad[eid]}{more}; fix it or pass --skip-bad to "
                     "leave it out")
+
+
+def _given_splits(report: Any, plan: Plan, opts: BuildOptions) -> None:
+    """Add the splits a user gives (--holdout-objects, --split-file), leak-checked."""
+    from .given_splits import check_given, given_objects_split, read_object_list, read_split_file
+
+    given = []
+    if opts.holdout_objects is not None:
+        src = str(opts.holdout_objects)
+        given.append((given_objects_split(plan.samples, read_object_list(opts.holdout_objects),
+                                          seed=opts.seed, source=src), src))
+    given += [(read_split_file(f), str(f)) for f in opts.split_files]
+    for sp, src in given:
+        if report.get(sp.name) is not None or any(g.name == sp.name for g in report.splits):
+            raise VtsError(f"two splits named {sp.name!r}", src)
+        check_given(sp, plan.samples, src)
+        report.splits.append(sp)
 
 
 def _splits(plan: Plan, seed: int) -> Any:
@@ -1076,7 +1130,8 @@ def write_plan_files(stage: Path, plan: Plan, splits: Any) -> dict[str, str]:
 
     for kind in KINDS:
         write_metadata(stage / "data" / f"{kind}.zarr", plan.layouts[kind])
-        write_index(stage / "index" / f"{kind}.parquet", kind, plan.metas[kind])
+        write_index(stage / "index" / f"{kind}.parquet", kind, plan.metas[kind],
+                    plan.extras.get(kind))
     split_dir = stage / "meta" / "splits"
     names = {sp.name for sp in splits.splits}
     if split_dir.is_dir():

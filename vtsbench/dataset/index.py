@@ -8,12 +8,12 @@ depth allows); the writer's settings are fixed, so the same rows give the same b
 from __future__ import annotations
 
 import io
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from ..errors import VtsError
-from .schema import SampleMeta, index_schema, index_schema_of
+from .schema import SampleMeta, extra_column_name, index_schema, index_schema_of
 
 #: Parquet settings: zstd pages, one row group (an index is small), statistics on.
 PARQUET_OPTIONS: dict[str, Any] = {"compression": "zstd", "compression_level": 3,
@@ -21,8 +21,12 @@ PARQUET_OPTIONS: dict[str, Any] = {"compression": "zstd", "compression_level": 3
                                    "row_group_size": 1 << 20}
 
 
-def index_bytes(kind: str, metas: Sequence[SampleMeta]) -> bytes:
-    """The parquet file of one kind's index; rows must be in row order 0..N-1."""
+def index_bytes(kind: str, metas: Sequence[SampleMeta],
+                extra: Mapping[str, Sequence[str | None]] | None = None) -> bytes:
+    """The parquet file of one kind's index; rows must be in row order 0..N-1.
+
+    extra: more string columns (name -> one value per row, None where a row has none), after
+    the fixed ones in name order: the recordings' own fields, which `where()` filters on."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -32,17 +36,25 @@ def index_bytes(kind: str, metas: Sequence[SampleMeta]) -> bytes:
                              f"out of place in the {kind} index")
     known = all(m.mm_per_px_x is not None and m.mm_per_px_y is not None for m in metas)
     table = pa.Table.from_pylist([m.to_row() for m in metas], schema=index_schema(kind, known))
+    for name in sorted(extra or {}):
+        values = list((extra or {})[name])
+        if len(values) != len(metas) or extra_column_name(name) != name:
+            raise ValueError(f"extra index column {name!r}: bad name or {len(values)} values "
+                             f"for {len(metas)} rows")
+        table = table.append_column(pa.field(name, pa.string(), nullable=True),
+                                    pa.array(values, pa.string()))
     buf = io.BytesIO()
     pq.write_table(table, buf, **PARQUET_OPTIONS)
     return buf.getvalue()
 
 
-def write_index(path: Path, kind: str, metas: Sequence[SampleMeta]) -> None:
-    """Write one kind's index atomically."""
+def write_index(path: Path, kind: str, metas: Sequence[SampleMeta],
+                extra: Mapping[str, Sequence[str | None]] | None = None) -> None:
+    """Write one kind's index atomically (extra: see index_bytes)."""
     from .store import write_file
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_file(path, index_bytes(kind, metas))
+    write_file(path, index_bytes(kind, metas, extra))
 
 
 def read_index(path: Path, kind: str) -> list[SampleMeta]:

@@ -164,13 +164,38 @@ def index_schema(kind: str, scale_known: bool = True) -> pyarrow.Schema:
 
 
 def index_schema_of(table_schema: pyarrow.Schema, kind: str) -> pyarrow.Schema | None:
-    """The index schema (either scale variant) a read table has, or None if neither."""
+    """The index schema (either scale variant) a read table has, or None if neither.
+
+    The fixed columns may be followed by extra nullable string columns: the recordings' own
+    fields (pattern fields, `take`, keys of an entry's meta), see `extra_column_name`."""
+    import pyarrow as pa
+
     have = table_schema.remove_metadata()
     for known in (True, False):
         want = index_schema(kind, known)
-        if have.equals(want):
-            return want
+        n = len(want)
+        if len(have) < n or not pa.schema(list(have)[:n]).equals(want):
+            continue
+        extra = list(have)[n:]
+        if all(f.type == pa.string() and f.nullable and EXTRA_NAME_RE.match(f.name)
+               and f.name not in INDEX_COLUMNS for f in extra):
+            return have
     return None
+
+
+#: An extra index column's name: a lowercase identifier (the field's name, cleaned).
+EXTRA_NAME_RE = re.compile(r"^[a-z_][a-z0-9_]{0,63}$")
+
+
+def extra_column_name(key: str) -> str | None:
+    """The index column for a recording's own field or meta key: lowercased, other characters
+    as '_', prefixed `meta_` where it would shadow a fixed column; None if nothing is left."""
+    name = re.sub(r"[^a-z0-9_]+", "_", str(key).strip().lower()).strip("_")[:58]
+    if not name:
+        return None
+    if name[0].isdigit() or name in INDEX_COLUMNS or name in ("kind", "labels", "meta"):
+        name = f"meta_{name}"
+    return name if EXTRA_NAME_RE.match(name) else None
 
 
 @dataclass(frozen=True)

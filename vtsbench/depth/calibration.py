@@ -28,7 +28,7 @@ import numpy as np
 
 from ..errors import VtsError
 from .mapping import METHODS, Mapping, fit_mapping, mapping_from_arrays
-from .sphere import Rim, ball_radius_px, detect_circle, sphere_fields
+from .sphere import Rim, ball_radius_px, circle_doubts, detect_circle, sphere_fields
 
 FORMAT = "vtsbench.calibration"
 FORMAT_VERSION = "1.0"
@@ -43,6 +43,10 @@ CAP_SAMPLES = 4000
 FLAT_SAMPLES = 1500
 #: Default Gaussian blur (px) of the colour difference before the mapping (sensor noise).
 BLUR_PX = 1.0
+#: The solvers every held-out press is scored with, and the figures kept for each.
+SOLVERS = ("dct", "dst", "masked")
+SOLVER_KEYS = ("plane_aligned_rmse_mm", "contact_rmse_mm", "peak_depth_error_mm", "min_depth_mm",
+               "negative_share", "border_abs_mm")
 SCHEMA_PATH = Path(__file__).resolve().parent.parent / "schemas" / "calibration.schema.json"
 
 
@@ -344,6 +348,8 @@ class HeldOut:
     pred_depth: np.ndarray
     region: np.ndarray
     held_out: bool = True
+    #: The errors and artefacts of every solver (dct, dst, masked) on this press.
+    by_solver: dict[str, dict[str, float]] = field(default_factory=dict)
 
 
 @dataclass
@@ -355,6 +361,21 @@ class CalibrationRun:
     warnings: list[str]
     seconds: float
     train_examples: list[HeldOut] = field(default_factory=list)
+    #: Per press: the circle used (labelled or detected), the other one, status and reasons.
+    presses: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def dropped(self) -> list[str]:
+        return [p["id"] for p in self.presses if p["status"] == "dropped"]
+
+    @property
+    def doubted(self) -> list[str]:
+        return [p["id"] for p in self.presses if p["status"] == "doubted"]
+
+    @property
+    def retried(self) -> list[str]:
+        """Presses whose first detected circle failed its check and was detected again."""
+        return [p["id"] for p in self.presses if p.get("retried_after")]
 
     @property
     def shown(self) -> list[HeldOut]:
@@ -366,6 +387,35 @@ def _press_frame(root: Path, e: Any) -> np.ndarray:
     from ..recordings.media import read_frame
 
     return read_frame(root / e.source.path, e.source.frame or 0)
+
+
+def check_scale(scale: tuple[float, float], ball_radius_mm: float, shape: tuple[int, int],
+                radii_px: list[float], given: bool) -> None:
+    """Refuse a scale that contradicts the ball and the image or the labelled circles, with one
+    line; a value that looks like px/mm (above 1 mm/px, its inverse plausible) gets the hint."""
+    what = f"--mm-per-px {scale[0]:g}" if given else f"mm_per_px {scale[0]:g} of the recordings"
+    ball = ball_radius_px(ball_radius_mm, scale)
+    h, w = shape
+    why = None
+    if ball < 2.0:
+        why = (f"makes the {ball_radius_mm:g} mm ball {ball:.2g} px in radius: too small to "
+               "press a visible contact")
+    elif ball > math.hypot(h, w):
+        why = f"makes the {ball_radius_mm:g} mm ball {ball:.0f} px in radius, beyond the " \
+              f"{h}x{w} image"
+    elif radii_px and float(np.median(radii_px)) > RADIUS_TOLERANCE * ball:
+        why = (f"makes the {ball_radius_mm:g} mm ball {ball:.1f} px in radius, but half the "
+               f"labelled circles are larger than {float(np.median(radii_px)):g} px")
+    elif radii_px and max(radii_px) < 0.1 * ball:
+        why = (f"makes the {ball_radius_mm:g} mm ball {ball:.0f} px in radius, but no labelled "
+               f"circle is larger than {max(radii_px):g} px")
+    if why is None:
+        return
+    hint = ""
+    inv = 1.0 / scale[0]
+    if scale[0] > 1.0 and 2.0 <= ball_radius_mm / inv <= math.hypot(h, w):
+        hint = f"; {scale[0]:g} looks like px per mm: did you mean --mm-per-px {inv:.5g}?"
+    raise VtsError(f"{what} {why} (check the scale and the ball radius){hint}")
 
 
 def _resolve_scale(sessions: list[Any], mm_per_px: float | None) -> tuple[float, float]:
@@ -416,10 +466,35 @@ def _resolve_background(root: Path, sessions: list[Any], frames: list[np.ndarray
     return bg, how
 
 
+def _retry_detection(img: np.ndarray, bg: np.ndarray, ball_px: float
+                     ) -> tuple[float, float, float] | None:
+    """A second detection started from the changed region's centre and size; kept only when it
+    passes the check that the first one failed."""
+    from .sphere import change_support
+
+    sup = change_support(img, bg)
+    if sup is None:
+        return None
+    found = detect_circle(img, bg, start=(sup[0], sup[1], 0.8 * sup[2]))
+    if found is None or circle_doubts(found, img, bg, ball_px):
+        return None
+    return found
+
+
+def _circle(c: tuple[float, float, float] | None) -> dict[str, float | None] | None:
+    return None if c is None else {"x": _num(c[0]), "y": _num(c[1]), "r": _num(c[2])}
+
+
 def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
-                 background: Path | None = None, estimate_background: bool = False
+                 background: Path | None = None, estimate_background: bool = False,
+                 circles: str = "label"
                  ) -> tuple[list[Press], np.ndarray, dict[str, Any], list[str]]:
-    """The usable presses of a recordings folder, the background, the setup and warnings."""
+    """The usable presses of a recordings folder, the background, the setup and warnings.
+
+    circles: "label" uses labelled circles and detects the others; "detect" detects every
+    circle (the labels are kept in the record for comparison). Every circle is checked
+    (`sphere.circle_doubts`): an implausible detected circle drops its press, a doubted label is
+    used with a warning; setup["presses"] records, per press, the circle used and why."""
     from ..recordings.manifest import load_manifest
 
     root = Path(folder)
@@ -439,6 +514,10 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
                        "separately", root)
     shape = (int(shapes[0][0]), int(shapes[0][1]))
     scale = _resolve_scale(sessions, mm_per_px)
+    balls = [float(e.ball_radius_mm) for e in entries if e.ball_radius_mm is not None]
+    if balls:
+        check_scale(scale, min(balls), shape,
+                    [e.circle.r for e in entries if e.circle is not None], mm_per_px is not None)
     for e in entries:
         if e.ball_radius_mm is None:
             raise VtsError(f"press {e.id} has no ball radius (set ball_radius_mm in the "
@@ -463,23 +542,47 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
     bg, bg_how = _resolve_background(root, sessions, frames, background, estimate_background,
                                      shape)
     presses, warnings, lost = [], [], []
+    record: list[dict[str, Any]] = []
     for e, img in zip(entries, frames, strict=True):
         truth = root / e.truth if e.truth else None
-        if e.circle is not None:
-            presses.append(Press(e.id, img, e.circle.x, e.circle.y, e.circle.r,
-                                 float(e.ball_radius_mm), "label", truth))
-            continue
-        found = detect_circle(img, bg)
-        if found is None:
+        ball = ball_radius_px(float(e.ball_radius_mm), scale)
+        label = None if e.circle is None else (e.circle.x, e.circle.y, e.circle.r)
+        found = detect_circle(img, bg) if label is None or circles == "detect" else None
+        use, source = (label, "label") if label is not None and circles != "detect" \
+            else (found, "detected")
+        row: dict[str, Any] = {"id": e.id, "source": source, "label": _circle(label),
+                               "detected": _circle(found), "circle": _circle(use)}
+        doubts = [] if use is None else circle_doubts(use, img, bg, ball)
+        if source == "detected" and use is not None and doubts:
+            # retry from the imprint as the colour change shows it (the strongest change can be
+            # a small saturated patch beside the contact); a frame without contact is not
+            # retried: the noise would give some circle
+            again = _retry_detection(img, bg, ball)
+            if again is not None:
+                row.update(detected=_circle(again), circle=_circle(again),
+                           retried_after=doubts, first_detected=_circle(use))
+                warnings.append(f"press {e.id}: first detected circle implausible "
+                                f"({'; '.join(doubts)}); detected again from the imprint: "
+                                f"({again[0]:.1f}, {again[1]:.1f}) r {again[2]:.1f} px")
+                use, found, doubts = again, again, []
+        if use is None:
+            row.update(status="dropped", reasons=["no visible contact: no circle detected"])
+        elif doubts and source == "detected":
+            row.update(status="dropped", reasons=[f"implausible detected circle: {d}"
+                                                  for d in doubts])
+        else:
+            row.update(status="doubted" if doubts else "used", reasons=doubts)
+            presses.append(Press(e.id, img, *use, float(e.ball_radius_mm), source, truth))
+        if row["status"] == "dropped":
             lost.append(e.id)
-            continue
-        presses.append(Press(e.id, img, *found, float(e.ball_radius_mm), "detected", truth))
-    if lost:
-        warnings.append(f"no visible contact in {len(lost)} press(es), dropped: "
-                        f"{', '.join(lost)}")
+            warnings.append(f"press {e.id} dropped: {'; '.join(row['reasons'])}")
+        elif row["status"] == "doubted":
+            warnings.append(f"press {e.id}: labelled circle doubted ({'; '.join(doubts)}); "
+                            "used as labelled")
+        record.append(row)
     radii = sorted({p.ball_radius_mm for p in presses})
     setup = {"root": root, "sensor": sensors[0], "shape": shape, "mm_per_px": scale,
-             "background": bg_how, "lost": lost, "n_entries": len(entries),
+             "background": bg_how, "lost": lost, "n_entries": len(entries), "presses": record,
              "ball_radius_mm": radii[0] if radii else float(entries[0].ball_radius_mm)}
     if len(radii) > 1:
         warnings.append(f"presses of several ball radii ({radii} mm); the file records "
@@ -526,15 +629,35 @@ def evaluate_press(cal: Calibration, press: Press, *, solver: str = "dct",
     g = cal.gradients(press.image)
     e = np.hypot(g[..., 0] - f.p, g[..., 1] - f.q)[f.trusted]
     grad_rmse = float(np.sqrt(np.mean(e**2))) if e.size else math.nan
-    pred = integrate(g[..., 0], g[..., 1], method=solver, mm_per_px=cal.mm_per_px)
     if press.truth is not None:
         t = read_truth(press.truth)
         true, region, ref = t.depth_mm[0], t.contact[0], "truth"
     else:
         true, region, ref = f.depth_mm, f.contact, "sphere"
-    errs = depth_errors(pred, true, region).to_dict()
-    errs = {"gradient_rmse": grad_rmse, **errs}
-    return HeldOut(press, errs, ref, true, pred, region, held_out)
+    preds, by_solver = {}, {}
+    for s in SOLVERS:
+        # masked: zero outside the press's contact, as the paper integrates
+        preds[s] = integrate(g[..., 0], g[..., 1], method=s, mm_per_px=cal.mm_per_px,
+                             mask=region if s == "masked" else None)
+        by_solver[s] = {**depth_errors(preds[s], true, region).to_dict(),
+                        **artefacts(preds[s])}
+    errs = {"gradient_rmse": grad_rmse, **by_solver[solver]}
+    return HeldOut(press, errs, ref, true, preds[solver], region, held_out, by_solver)
+
+
+#: Width (px) of the frame border whose mean |depth| measures border streaks.
+BORDER_PX = 2
+
+
+def artefacts(depth: np.ndarray) -> dict[str, float]:
+    """Negative depth (the lowest value, mm; and the share of pixels below -0.02 mm) and border
+    streaks (mean |depth| over the outermost BORDER_PX pixels, mm) of one depth map."""
+    b = BORDER_PX
+    edge = np.concatenate([depth[:b].ravel(), depth[-b:].ravel(), depth[b:-b, :b].ravel(),
+                           depth[b:-b, -b:].ravel()])
+    return {"min_depth_mm": float(depth.min()),
+            "negative_share": float((depth < -0.02).mean()),
+            "border_abs_mm": float(np.abs(edge).mean())}
 
 
 def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = None,
@@ -542,7 +665,7 @@ def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = 
               estimate_background: bool = False, rim: Rim | None = None,
               blur_px: float = BLUR_PX, solver: str = "dct", device: str | None = "auto",
               options: dict[str, Any] | None = None,
-              log: Callable[[str], None] | None = None) -> CalibrationRun:
+              log: Callable[[str], None] | None = None, circles: str = "label") -> CalibrationRun:
     """Fit a calibration from the presses of a recordings folder (see the module doc).
 
     holdout: presses kept out of training and scored (default: a fifth, none below 4 presses).
@@ -554,17 +677,20 @@ def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = 
     if method not in METHODS:
         raise VtsError(f"unknown method {method!r} (use one of {', '.join(METHODS)})")
     rim = rim or Rim()
+    if circles not in ("label", "detect"):
+        raise VtsError(f"--circles must be label or detect, got {circles!r}")
     presses, bg, setup, warnings = load_presses(folder, mm_per_px=mm_per_px,
                                                 background=background,
-                                                estimate_background=estimate_background)
+                                                estimate_background=estimate_background,
+                                                circles=circles)
     n = len(presses)
     k = (n // 5 if n - n // 5 >= MIN_TRAIN else 0) if holdout is None else int(holdout)
     if k < 0:
         raise VtsError(f"--holdout must be >= 0, got {k}")
     if n < MIN_TRAIN + k:
         lost = setup["lost"]
-        why = f" ({len(lost)} of {setup['n_entries']} without visible contact: " \
-              f"{', '.join(lost)})" if lost else ""
+        why = f" ({len(lost)} of {setup['n_entries']} without visible contact or with an " \
+              f"implausible circle: {', '.join(lost)})" if lost else ""
         raise VtsError(f"too few presses: {n} usable{why}; need at least {MIN_TRAIN + k} "
                        f"({MIN_TRAIN} to train plus --holdout {k})", setup["root"])
     for w_ in warnings:
@@ -617,9 +743,14 @@ def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = 
         "holdout_mean": {kk: _num(float(np.mean([r.errors[kk] for r in results])))
                          for kk in keys} if results else {},
     }
+    if results:  # every solver's absolute error and artefacts, side by side
+        cal.fit["holdout_mean"].update({
+            f"{s}_{kk}": _num(float(np.mean([r.by_solver[s][kk] for r in results])))
+            for s in SOLVERS for kk in SOLVER_KEYS})
     examples = [] if results else [evaluate_press(cal, p, solver=solver, held_out=False)
                                    for p in train[:3]]
-    return CalibrationRun(cal, results, warnings, time.perf_counter() - t0, examples)
+    return CalibrationRun(cal, results, warnings, time.perf_counter() - t0, examples,
+                          setup["presses"])
 
 
 def _num(v: float) -> float | None:

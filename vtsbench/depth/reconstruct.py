@@ -10,7 +10,8 @@ a colour-mapped `.png` per frame out.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import math
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -118,20 +119,72 @@ def _torch_depth(frames: np.ndarray, cal: Calibration, solver: str, mask: np.nda
 # -- files ------------------------------------------------------------------------------------
 
 
-def colourise(depth: np.ndarray, vmax: float | None = None) -> np.ndarray:
-    """A depth map (mm) as RGB uint8: 0 (and above the gel) black-violet, vmax yellow (viridis).
+#: The colour of the most negative depth shown (above the gel's rest surface): red, so that a
+#: reconstruction's negative depth stands out against the viridis scale of positive depth.
+NEGATIVE_RGB = (230, 40, 40)
+
+
+def colourise(depth: np.ndarray, vmax: float | None = None,
+              vmin: float | None = None) -> np.ndarray:
+    """A depth map (mm) as RGB uint8: 0 to vmax on viridis (0 dark violet, vmax yellow) and
+    vmin to 0 (negative depth, above the rest surface) from red to viridis' 0, so negative depth
+    is visible, never clipped to 0.
 
     vmax defaults to the frame's 99.9th percentile, at least 0.05 mm, so an untouched frame is
-    not stretched into noise.
+    not stretched into noise; vmin to the frame's 0.1th percentile when below -0.005 mm, else
+    -vmax / 10. Values beyond the range take the end colours.
     """
     from matplotlib import colormaps
 
     d = np.nan_to_num(np.asarray(depth, np.float32))
-    if vmax is None:
-        vmax = max(float(np.percentile(d, 99.9)), 0.05)
-    t = np.clip(d / vmax, 0.0, 1.0)
+    vmax, vmin = colour_range(d, vmax, vmin)
     lut = (colormaps["viridis"](np.linspace(0, 1, 256))[:, :3] * 255).round().astype(np.uint8)
-    return lut[(t * 255).round().astype(np.int64)]
+    t = np.clip(d / vmax, 0.0, 1.0)
+    out = lut[(t * 255).round().astype(np.int64)]
+    neg = d < 0
+    if neg.any():
+        u = np.clip(d[neg] / vmin, 0.0, 1.0)[:, None]
+        out[neg] = ((1 - u) * lut[0] + u * np.array(NEGATIVE_RGB)).round().astype(np.uint8)
+    return out
+
+
+def colour_range(d: np.ndarray, vmax: float | None, vmin: float | None) -> tuple[float, float]:
+    """(vmax, vmin) of colourise: the given values, else the frame's (see colourise)."""
+    if vmax is None:
+        vmax = max(float(np.percentile(d, 99.9)), 0.05) if d.size else 0.05
+    if vmin is None:
+        low = float(np.percentile(d, 0.1)) if d.size else 0.0
+        vmin = low if low < -0.005 else -vmax / 10
+    if not (math.isfinite(vmax) and math.isfinite(vmin) and vmin < 0 < vmax):
+        raise VtsError(f"the colour range must have MIN < 0 < MAX, got {vmin:g},{vmax:g}")
+    return float(vmax), float(vmin)
+
+
+def with_colour_bar(rgb: np.ndarray, vmax: float, vmin: float) -> np.ndarray:
+    """The colourised frame with a colour bar on its right: the scale from vmin to vmax with
+    its ends and 0 labelled in mm (OpenCV text: a bar per frame costs well under a millisecond,
+    a matplotlib figure about 50 ms)."""
+    import cv2
+
+    h = rgb.shape[0]
+    bar_w, text_w = max(6, h // 24), max(48, h // 5)
+    levels = np.linspace(vmax, vmin, h, dtype=np.float32)[:, None]
+    bar = colourise(np.repeat(levels, bar_w, axis=1), vmax, vmin)
+    panel = np.full((h, text_w, 3), 255, np.uint8)
+    scale = max(0.3, h / 700)
+    thick = 1
+    for v in (vmax, 0.0, vmin):
+        y = round((vmax - v) / (vmax - vmin) * (h - 1))
+        cv2.line(panel, (0, y), (3, y), (0, 0, 0), 1)
+        label = f"{v:+.3g}" if v else "0"
+        (_, th), _ = cv2.getTextSize(label, cv2.FONT_HERSHEY_SIMPLEX, scale, thick)
+        ty = min(max(y + th // 2, th + 1), h - 2)
+        cv2.putText(panel, label, (5, ty), cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0),
+                    thick, cv2.LINE_AA)
+    cv2.putText(panel, "mm", (5, h // 2 + int(14 * scale * 2)), cv2.FONT_HERSHEY_SIMPLEX,
+                scale, (90, 90, 90), thick, cv2.LINE_AA)
+    gap = np.full((h, 2, 3), 255, np.uint8)
+    return np.concatenate([rgb, gap, bar, panel], axis=1)
 
 
 def _frames(path: Path, batch: int) -> Iterator[tuple[list[str], np.ndarray]]:
@@ -171,9 +224,81 @@ def _frames(path: Path, batch: int) -> Iterator[tuple[list[str], np.ndarray]]:
                 raise VtsError("video has no readable frame", path)
 
 
+GLOB_CHARS = "*?["
+
+
+def expand_inputs(paths: list[str | Path]) -> list[Path]:
+    """The inputs of `vtsbench depth`: each path as is, or a glob's matches (sorted; '**'
+    recurses); a glob that matches nothing, or a missing path, is an error naming it."""
+    import glob
+
+    out: list[Path] = []
+    for p in paths:
+        text = str(p)
+        if not Path(text).exists() and any(c in text for c in GLOB_CHARS):
+            hits = sorted(glob.glob(text, recursive=True))
+            if not hits:
+                raise VtsError("the pattern matches no file", text)
+            out += [Path(h) for h in hits]
+        elif not Path(text).exists():
+            raise VtsError("not found (expected an image, a folder of images or a video)", text)
+        else:
+            out.append(Path(text))
+    seen: set[Path] = set()
+    return [p for p in out if not (p.resolve() in seen or seen.add(p.resolve()))]
+
+
+def parse_range(text: str | None) -> tuple[float, float] | None:
+    """--range MIN,MAX (mm) as (vmin, vmax), or None; one-line errors."""
+    if text is None:
+        return None
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise VtsError(f"--range expects MIN,MAX in mm such as -0.2,1.5, got {text!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < 0 < hi):
+        raise VtsError(f"--range needs finite MIN < 0 < MAX (0, the rest surface, must be "
+                       f"inside), got {text!r}")
+    return lo, hi
+
+
+def depth_paths(inputs: list[str | Path], calibration: str | Path, out: str | Path, *,
+                solver: str = "dct", device: str | None = "auto", batch: int = 8,
+                value_range: tuple[float, float] | None = None,
+                log: Callable[[str], None] | None = None) -> int:
+    """`vtsbench depth` on several images, folders, videos or globs. With several inputs, the
+    frames of a folder or a video go to OUT/<its name>/; images go to OUT. Returns frames done."""
+    paths = expand_inputs(inputs)
+    out = Path(out)
+    several = len(paths) > 1
+    names: dict[Path, Path] = {}
+    for p in paths:  # where each input's maps go, refusing two inputs with the same target
+        from ..recordings.media import media_kind
+
+        target = out / p.stem if several and media_kind(p) != "image" else out
+        key = target / p.stem if media_kind(p) == "image" else target
+        if key in names:
+            raise VtsError(f"two inputs write the same depth maps ({names[key]} and {p}); "
+                           "rename one or run them separately", p)
+        names[key] = p
+    n = 0
+    for k, p in enumerate(paths, start=1):
+        from ..recordings.media import media_kind
+
+        target = out / p.stem if several and media_kind(p) != "image" else out
+        done = depth_folder(p, calibration, target, solver=solver, device=device, batch=batch,
+                            value_range=value_range)
+        n += done
+        if log is not None:
+            log(f"depth: {k}/{len(paths)} {p}: {done} frame(s) -> {target}")
+    return n
+
+
 def depth_folder(images: str | Path, calibration: str | Path, out: str | Path, *,
-                 solver: str = "dct", device: str | None = "auto", batch: int = 8) -> int:
-    """Write <name>.npy (float32 mm) and <name>.png (colour-mapped) per frame; frames done."""
+                 solver: str = "dct", device: str | None = "auto", batch: int = 8,
+                 value_range: tuple[float, float] | None = None) -> int:
+    """Write <name>.npy (float32 mm) and <name>.png (colour-mapped, with a colour bar; the
+    frame's own range, or value_range (MIN, MAX) mm for every frame) per frame; frames done."""
     import io
 
     from ..atomic import write_bytes_atomic
@@ -196,6 +321,8 @@ def depth_folder(images: str | Path, calibration: str | Path, out: str | Path, *
             buf = io.BytesIO()
             np.save(buf, d.astype(np.float32), allow_pickle=False)
             write_bytes_atomic(out / f"{name}.npy", buf.getvalue())
-            write_png(out / f"{name}.png", colourise(d))
+            lo, hi = value_range if value_range is not None else (None, None)
+            vmax, vmin = colour_range(d, hi, lo)
+            write_png(out / f"{name}.png", with_colour_bar(colourise(d, vmax, vmin), vmax, vmin))
             n += 1
     return n

@@ -48,13 +48,17 @@ def summary(run: CalibrationRun) -> dict[str, Any]:
     rows = [{"id": r.press.id, "held_out": r.held_out, "reference": r.reference,
              "circle": {"x": r.press.x, "y": r.press.y, "r": r.press.r,
                         "source": r.press.circle_source},
-             **{k: (None if not math.isfinite(v) else v) for k, v in r.errors.items()}}
+             **{k: (None if not math.isfinite(v) else v) for k, v in r.errors.items()},
+             "by_solver": {s: {k: (None if not math.isfinite(v) else v) for k, v in e.items()}
+                           for s, e in r.by_solver.items()}}
             for r in run.shown]
     return {"method": cal.method, "params": cal.mapping.params, "sensor": cal.sensor,
             "resolution": list(cal.resolution), "mm_per_px": list(cal.mm_per_px),
             "n_presses": cal.n_presses, "seconds": round(run.seconds, 2),
             "train_gradient_rmse": cal.fit.get("train_gradient_rmse"),
             "holdout_mean": cal.fit.get("holdout_mean", {}), "presses": rows,
+            "circles": run.presses, "dropped": run.dropped, "doubted": run.doubted,
+            "retried": run.retried,
             "warnings": run.warnings}
 
 

@@ -181,14 +181,17 @@ def _ray_peaks(m: np.ndarray, cx: float, cy: float, r_max: float, sigma: float,
 
 
 def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | None = None,
-                  min_radius_px: float = 3.0) -> tuple[float, float, float] | None:
+                  min_radius_px: float = 3.0,
+                  start: tuple[float, float, float] | None = None
+                  ) -> tuple[float, float, float] | None:
     """The contact circle (x, y, r) px of a ball press, or None when no contact is visible.
 
     Blur the change to the background, keep what stands clearly above the noise (6 robust
     standard deviations and a fifth of the strongest change), take the convex hull of the
     largest connected component (the flat top of the cap barely changes colour), then fit a
     circle to the peak of the change along rays from its centroid, twice, dropping rays more
-    than 2.5 robust deviations off the circle.
+    than 2.5 robust deviations off the circle. start: a first guess (x, y, r) instead of the
+    component (what calibration retries with when the first circle fails its check).
     """
     import cv2
 
@@ -196,6 +199,8 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     if sigma is None:
         sigma = max(1.0, min(h, w) / 240)
     m = change_map(image, background, sigma)
+    if start is not None:
+        return _fit_rays(m, *start, sigma, min_radius_px)
     med = float(np.median(m))
     mad = float(np.median(np.abs(m - med))) * 1.4826 + 1e-3
     peak = float(np.percentile(m, 99.99))
@@ -214,8 +219,15 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     cv2.fillConvexPoly(comp, cv2.convexHull(pts), 1)
     area = int(comp.sum())
     ys, xs = np.nonzero(comp)
-    cx, cy = float(xs.mean()), float(ys.mean())
-    r0 = math.sqrt(area / math.pi)
+    return _fit_rays(m, float(xs.mean()), float(ys.mean()), math.sqrt(area / math.pi), sigma,
+                     min_radius_px)
+
+
+def _fit_rays(m: np.ndarray, cx: float, cy: float, r0: float, sigma: float,
+              min_radius_px: float) -> tuple[float, float, float] | None:
+    """Fit the circle to the edges found along rays from (cx, cy), three times (see
+    detect_circle)."""
+    h, w = m.shape
     r = r0
     for _ in range(3):
         px, py = _ray_peaks(m, cx, cy, 1.5 * max(r0, r), sigma)
@@ -232,3 +244,73 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     if not (r >= min_radius_px and 0 <= cx < w and 0 <= cy < h):
         return None
     return cx, cy, r
+
+
+# -- self-check of a contact circle ------------------------------------------------------------
+
+#: A circle is doubted when its radius is outside [SUPPORT_LOW, SUPPORT_HIGH] times the radius
+#: of the area whose colour change stands above the noise (measured: good circles at 0.49-0.63
+#: of it on DIGIT presses, which have a wide skirt, 0.72-1.02 on Taxim's GelSight, its labels up
+#: to 1.32; the wrong detections at 0.15 and 0.31), or when less than COVER_MIN of its disc
+#: shows a change (a centre off the imprint).
+SUPPORT_LOW, SUPPORT_HIGH = 0.4, 1.6
+COVER_MIN = 0.5
+
+
+def _change_threshold(m: np.ndarray) -> tuple[float, float]:
+    """(strict, loose) thresholds of a change map: clearly changed, and above the noise."""
+    med = float(np.median(m))
+    mad = float(np.median(np.abs(m - med))) * 1.4826 + 1e-3
+    peak = float(np.percentile(m, 99.99))
+    return (max(med + 6 * mad, med + 0.2 * (peak - med), med + 3.0),
+            max(med + 4 * mad, med + 0.05 * (peak - med), med + 2.0))
+
+
+def change_support(image: np.ndarray, background: np.ndarray, sigma: float | None = None
+                   ) -> tuple[float, float, float] | None:
+    """The imprint as the colour change shows it: (x, y, r) of the largest region whose change
+    stands above the noise (r: the radius of a disc of its area), or None if there is none."""
+    import cv2
+
+    h, w = image.shape[:2]
+    sigma = max(1.0, min(h, w) / 240) if sigma is None else sigma
+    m = change_map(image, background, sigma)
+    _, loose = _change_threshold(m)
+    n, _, stats, cent = cv2.connectedComponentsWithStats((m > loose).astype(np.uint8),
+                                                         connectivity=8)
+    if n <= 1:
+        return None
+    best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    area = float(stats[best, cv2.CC_STAT_AREA])
+    return float(cent[best, 0]), float(cent[best, 1]), math.sqrt(area / math.pi)
+
+
+def circle_doubts(circle: tuple[float, float, float], image: np.ndarray, background: np.ndarray,
+                  ball_px: float) -> list[str]:
+    """Why a contact circle (x, y, r px) is implausible for this press, or [] when it is not:
+    larger than the ball, a radius far from what the colour change supports, a disc that
+    mostly shows no change (centre off the imprint), a centre off the image."""
+    x, y, r = circle
+    h, w = image.shape[:2]
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(r)) or r <= 0:
+        return [f"circle ({x}, {y}, {r}) is not a circle"]
+    out = []
+    if not (0 <= x < w and 0 <= y < h):
+        out.append(f"centre ({x:.1f}, {y:.1f}) lies outside the {h}x{w} image")
+    if r > 1.3 * ball_px:
+        out.append(f"radius {r:.1f} px is larger than the ball ({ball_px:.1f} px)")
+    sup = change_support(image, background)
+    if sup is None:
+        return [*out, "no visible colour change"]
+    sr = sup[2]
+    if not SUPPORT_LOW * sr <= r <= SUPPORT_HIGH * sr:
+        out.append(f"radius {r:.1f} px, but the colour change covers about {sr:.1f} px")
+    m = change_map(image, background, max(1.0, min(h, w) / 240))
+    _, loose = _change_threshold(m)
+    yy, xx = np.ogrid[:h, :w]
+    disc = (xx - x) ** 2 + (yy - y) ** 2 <= r * r
+    cover = float((m[disc] > loose).mean()) if disc.any() else 0.0
+    if cover < COVER_MIN:
+        out.append(f"only {cover:.0%} of the circle shows a colour change (centre off the "
+                   "imprint)")
+    return out

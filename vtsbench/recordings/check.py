@@ -38,12 +38,14 @@ class _Media:
 
 
 def check_folder(folder: str | Path, deep: bool = False, workers: int = 2,
-                 decode: bool = True) -> CheckReport:
+                 decode: bool = True, labels: Path | None = None,
+                 progress: bool = False) -> CheckReport:
     """Check a recordings folder: schema, references, media, frame ranges, sizes and labels.
 
     decode=False (what `vtsbench build` screens with): PNG frames are sized from their headers
     instead of decoded, since the build decodes them anyway and reports a frame that does not
-    decode; other images and the video frames are decoded as without it."""
+    decode; other images and the video frames are decoded as without it. progress: lines on
+    stderr while the media are opened, when stderr is not a terminal."""
     folder = Path(folder)
     report = CheckReport()
     try:
@@ -58,11 +60,34 @@ def check_folder(folder: str | Path, deep: bool = False, workers: int = 2,
     m = Manifest.from_dict(doc)
     report.n_entries = len(m.entries)
     _check_ids(m, report)
-    media = _open_media(folder, m, deep, workers, decode)
+    media = _open_media(folder, m, deep, workers, decode, progress)
     _check_sessions(folder, m, media, report)
     for e in m.entries:
         _check_entry(folder, m, e, media, report)
+    if labels is not None:
+        _check_label_file(m, Path(labels), report)
     return report
+
+
+def _check_label_file(m: Manifest, labels: Path, report: CheckReport) -> None:
+    """A problem for every row of a labels CSV that matches no entry (its path compared with
+    the end of each entry's source path, its frame range with the entry's frames)."""
+    from .labels_file import entry_frames, read_labels, row_matches
+
+    try:
+        rows = read_labels(labels)
+    except VtsError as e:
+        report.problems.append(str(e))
+        return
+    srcs = []
+    for e in m.entries:
+        parts = e.source.path.replace("\\", "/").split("/")
+        srcs.append(([("/".join(parts[i:])) for i in range(len(parts))], entry_frames(e)))
+    for row in rows:
+        if not any(row_matches(row, rel, *fr) for tails, fr in srcs for rel in tails):
+            rng = "" if row.start is None else f" frames {row.start}-{row.stop}"
+            report.problems.append(f"{labels}: row {row.line} ({row.path}{rng}) matches no "
+                                   "entry")
 
 
 def _check_ids(m: Manifest, report: CheckReport) -> None:
@@ -91,8 +116,10 @@ def _frames_needed(m: Manifest) -> dict[str, set[int]]:
 
 
 def _open_media(folder: Path, m: Manifest, deep: bool, workers: int,
-                decode: bool = True) -> dict[str, _Media]:
+                decode: bool = True, progress: bool = False) -> dict[str, _Media]:
     """Probe every referenced source once (in threads: OpenCV releases the GIL)."""
+    from ..progress import LineProgress, is_terminal
+
     need = _frames_needed(m)
 
     def one(rel: str) -> tuple[str, _Media]:
@@ -107,8 +134,15 @@ def _open_media(folder: Path, m: Manifest, deep: bool, workers: int,
             out.probe, out.bad_frames = _video_frames(path, out.probe, sorted(need[rel]), deep)
         return rel, out
 
+    lines = LineProgress() if progress and not is_terminal() else None
+    task = None if lines is None else lines.add_task("checking sources", total=len(need))
+    out: dict[str, _Media] = {}
     with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
-        return dict(pool.map(one, sorted(need)))
+        for rel, media in pool.map(one, sorted(need)):
+            out[rel] = media
+            if lines is not None and task is not None:
+                lines.advance(task)
+    return out
 
 
 def _video_frames(path: Path, pr: Probe, frames: list[int], deep: bool

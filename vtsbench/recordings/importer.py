@@ -41,6 +41,9 @@ class ManifestOptions:
     stride: int | None = None
     force: bool = False
     out: Path | None = None  # where recordings.json goes (default: the folder itself)
+    labels: Path | None = None  # CSV of labels per file, folder or frame range
+    markers: tuple[str, ...] = ()  # FILE:FIELD=VALUE, a label from a marker file's presence
+    progress: bool = False  # lines on stderr while probing the files, when not a terminal
 
 
 def compile_pattern(pattern: str) -> re.Pattern[str]:
@@ -166,13 +169,24 @@ def build_pattern_manifest(folder: Path, opts: ManifestOptions,
         raise VtsError(f"no file matches the pattern {opts.pattern!r}", folder)
     circles = read_circles(opts.circles) if opts.circles else {}
     used: set[str] = set()
+    from .labels_file import Marker, apply_labels, apply_values, read_labels
+
+    markers = [Marker.parse(t) for t in opts.markers]
+    label_rows = read_labels(opts.labels) if opts.labels is not None else []
     stride = opts.stride or opts.window
     entries: list[Entry] = []
+    rels: list[str] = []
     short: list[str] = []
     session_probe: dict[str, tuple[int, int, float | None]] = {}
+    from ..progress import LineProgress, is_terminal
+
+    lines = LineProgress() if opts.progress and not is_terminal() else None
+    task = lines.add_task("reading files", total=len(matches)) if lines is not None else 0
     for rel, fields in matches:
         path = folder / rel
         pr = probe(path)
+        if lines is not None:
+            lines.advance(task)
         kind = opts.kind or ("static" if pr.kind == "image" else "sequence")
         if kind == "sequence" and pr.kind == "image":
             raise VtsError("a sequence needs a video or an image folder", path)
@@ -195,6 +209,10 @@ def build_pattern_manifest(folder: Path, opts: ManifestOptions,
                            source=Source(src, frame=None if pr.kind == "image" else 0))
         elif kind == "static" and pr.kind != "image":
             base = replace(base, source=Source(src, frame=0))
+        marked = {m.field: m.value for m in markers if m.applies(folder, rel)}
+        if marked:
+            base = apply_values(base, marked)
+        n_before = len(entries)
         if kind == "sequence" and opts.window:
             for k, s in enumerate(range(0, pr.n_frames - opts.window + 1, stride)):
                 entries.append(replace(base, id=f"{base.id}-w{k:03d}",
@@ -206,11 +224,19 @@ def build_pattern_manifest(folder: Path, opts: ManifestOptions,
                                        source=Source(src, frame=f)))
         else:
             entries.append(base)
+        rels += [rel] * (len(entries) - n_before)
     if short:
         say(f"left out {len(short)} of {len(matches)} matched files, shorter than --window "
             f"{opts.window}")
         if not entries:
             raise VtsError(f"every matched file is shorter than --window {opts.window}", folder)
+    if label_rows:
+        entries, stray = apply_labels(list(zip(rels, entries, strict=True)), label_rows)
+        for row in stray[:20]:
+            say(f"{opts.labels}: row {row.line} ({row.path}) matches no entry")
+        if stray:
+            say(f"{len(stray)} of {len(label_rows)} label rows match no entry "
+                "(`vtsbench check --labels` lists them)")
     unused = sorted(set(circles) - used)
     if unused:
         raise VtsError(f"{len(unused)} circle row(s) match no file of the pattern, first "
