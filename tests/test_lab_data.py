@@ -208,6 +208,15 @@ def test_build_keeps_fields_and_takes_given_splits(tmp_path) -> None:
     assert set(test.index.column("object").to_pylist()) == {"e", "f"}
     r = CliRunner().invoke(app, ["verify", str(ds), "--quick"])
     assert r.exit_code == 0, r.output
+    # the fields travel into the Hugging Face copy too
+    r = CliRunner().invoke(app, ["export-hf", str(ds), "--quiet"])
+    assert r.exit_code == 0, r.output
+    import datasets
+
+    hub = datasets.load_dataset(str(ds), "slip_given_objects", split="test",
+                                cache_dir=str(tmp_path / "hf-cache"))
+    assert {"camera", "take", "split"} <= set(hub.column_names)
+    assert set(hub["split"]) == {"test"} and set(hub["camera"]) == {"0", "1"}
     (tmp_path / "bad.txt").write_text("e\nzz\n")
     r = CliRunner().invoke(app, ["build", str(rec), str(tmp_path / "ds2"), "--no-depth",
                                  "--quiet", "--holdout-objects", str(tmp_path / "bad.txt")])

@@ -17,7 +17,7 @@ carries the `huggingface` features metadata.
 from __future__ import annotations
 
 import re
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +27,7 @@ import numpy as np
 
 from ..errors import VtsError
 from ..labels import DIRECTION_NAMES, STATES
-from .schema import INFO_PATH, KINDS
+from .schema import INDEX_COLUMNS, INFO_PATH, KINDS
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -110,8 +110,9 @@ def depth_preview_pngs(depth_mm: np.ndarray) -> list[bytes]:
 # -- schema --------------------------------------------------------------------------------
 
 
-def features_doc(info: Any, kind: str) -> dict[str, Any]:
-    """The `datasets` features (as the JSON datasets writes) of a kind's hub files."""
+def features_doc(info: Any, kind: str, extra: Sequence[str] = ()) -> dict[str, Any]:
+    """The `datasets` features (as the JSON datasets writes) of a kind's hub files; extra: the
+    index's own string columns (pattern fields, `take`, meta keys), after `source`."""
     seq = kind == "slip"
     t = info.frames_per_sequence
     h, w = info.resolution
@@ -135,6 +136,8 @@ def features_doc(info: Any, kind: str) -> dict[str, Any]:
         feats["motion_dx_mm"] = value("float64")
         feats["motion_dy_mm"] = value("float64")
     feats["source"] = value("string")
+    for name in extra:
+        feats[name] = value("string")
     feats["rgb"] = maybe_list({"_type": "Image"})
     if info.has_depth:
         shape = [t, h, w] if seq else [h, w]
@@ -145,13 +148,18 @@ def features_doc(info: Any, kind: str) -> dict[str, Any]:
     return feats
 
 
-def arrow_schema(info: Any, kind: str) -> pa.Schema:
+def extra_columns(view: View) -> list[str]:
+    """The index columns of a view beyond the fixed ones (the recordings' own fields)."""
+    return [n for n in view.index.column_names if n not in INDEX_COLUMNS]
+
+
+def arrow_schema(info: Any, kind: str, extra: Sequence[str] = ()) -> pa.Schema:
     """The arrow schema of a kind's hub files: datasets' own (its extension types for the
     depth array, so that `load_dataset` gives it back as Array2D/3D, and the
     `huggingface` features metadata), with the depth unit on the depth field."""
     import datasets
 
-    schema = datasets.Features.from_dict(features_doc(info, kind)).arrow_schema
+    schema = datasets.Features.from_dict(features_doc(info, kind, extra)).arrow_schema
     if "depth" in schema.names:
         i = schema.get_field_index("depth")
         meta = {"units": "mm", "meaning": "indentation into the gel, positive into the gel",
@@ -233,7 +241,8 @@ def _label_columns(view: View, kind: str) -> dict[str, pa.Array]:
         cols["direction"] = idx.column("direction").cast(pa.int64()).combine_chunks()
         for name in SLIP_PLAIN:
             cols[name] = idx.column(name).combine_chunks()
-    cols["source"] = idx.column("source").combine_chunks()
+    for name in ("source", *extra_columns(view)):
+        cols[name] = idx.column(name).combine_chunks()
     return cols
 
 
@@ -343,9 +352,9 @@ def write_kind(ds: VtsDataset, kind: str, root: Path, workers: int = 1,
 
     folder = root / HUB_DIR / kind
     folder.mkdir(parents=True, exist_ok=True)
-    schema = arrow_schema(ds.info, kind)
-    opts = _parquet_options(schema)
     view = ds.view(kind)
+    schema = arrow_schema(ds.info, kind, extra_columns(view))
+    opts = _parquet_options(schema)
     group_rows = _rows_per(view, ROW_GROUP_BYTES, 0.6)
     file_rows = max(group_rows, _rows_per(view, FILE_BYTES, 0.6) // group_rows * group_rows)
     files: list[tuple[str, int, np.ndarray]] = []  # (path, cell, positions)
