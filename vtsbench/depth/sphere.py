@@ -20,9 +20,10 @@ down into a skirt whose shape the sphere does not describe. A circle radius of a
 clamped to it before taking sqrt(R^2 - r^2), so every value is finite.
 
 `detect_circle` finds an unlabelled contact from the difference to the no-contact background:
-blur, threshold above the noise, largest component, then the circle through the strongest change
-along rays from its centre (the colour change is largest where the cap is steepest, at its rim),
-fitted by least squares with outliers dropped.
+blur, threshold above the noise, largest component for a first centre, then sub-pixel edge points
+along rays from it (the steepest fall of the change past its peak: the colour changes most where
+the cap is steepest, at its rim), a RANSAC circle with the ball's size as a prior, and a weighted
+geometric least-squares fit to its inliers.
 """
 
 from __future__ import annotations
@@ -334,10 +335,10 @@ def _fit_rays(m: np.ndarray, cx: float, cy: float, r0: float, sigma: float,
 # -- self-check of a contact circle ------------------------------------------------------------
 
 #: A circle is doubted when its radius is outside [SUPPORT_LOW, SUPPORT_HIGH] times the radius
-#: of the area whose colour change stands above the noise (measured: good circles at 0.49-0.63
-#: of it on DIGIT presses, which have a wide skirt, 0.72-1.02 on Taxim's GelSight, its labels up
-#: to 1.32; the wrong detections at 0.15 and 0.31), or when less than COVER_MIN of its disc
-#: shows a change (a centre off the imprint).
+#: of the area whose colour change stands above the noise (measured: good circles at 0.50-0.63
+#: of it on DIGIT presses, which have a wide skirt, 0.72-1.22 on Taxim's GelSight, its labels up
+#: to 1.32; the wrong detection, DIGIT 0008's first, at 0.17), or when less than COVER_MIN of
+#: its disc shows a change (a centre off the imprint).
 SUPPORT_LOW, SUPPORT_HIGH = 0.4, 1.6
 COVER_MIN = 0.5
 
