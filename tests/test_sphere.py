@@ -108,9 +108,10 @@ def test_ransac_circle_ignores_outliers_and_respects_the_radius_prior() -> None:
     (cx, cy, r), inl = ransac_circle(xs, ys, np.ones(120), r_range=(3, 30), tol=0.5)
     assert (cx, cy, r) == pytest.approx((40.3, 31.7, 12.6), abs=0.02)  # outliers within tol
     assert inl[40:].all() and inl[:40].sum() < 8
-    # the prior: no circle of this size may be returned
-    assert ransac_circle(xs, ys, np.ones(120), r_range=(20, 30), tol=0.5) is None or \
-        ransac_circle(xs, ys, np.ones(120), r_range=(20, 30), tol=0.5)[0][2] <= 30.5
+    # the prior: a radius range that excludes the circle never returns it
+    other = ransac_circle(xs, ys, np.ones(120), r_range=(20, 30), tol=0.5)
+    assert other is None or 19.5 <= other[0][2] <= 30.5
+    assert ransac_circle(xs[40:], ys[40:], np.ones(80), r_range=(20, 30), tol=0.5) is None
     assert ransac_circle(xs[:2], ys[:2], np.ones(2), r_range=(3, 30), tol=0.5) is None
 
 

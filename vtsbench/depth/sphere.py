@@ -217,6 +217,8 @@ def ransac_circle(xs: np.ndarray, ys: np.ndarray, weights: np.ndarray, *,
         inl = np.abs(np.hypot(xs - c[0], ys - c[1]) - c[2]) <= tol
         if inl.sum() < 3:
             return None
+    if not r_range[0] - tol <= c[2] <= r_range[1] + tol:
+        return None
     return c, inl
 
 
