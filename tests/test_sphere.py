@@ -15,6 +15,8 @@ from vtsbench.depth.sphere import (
     clamp_radius,
     detect_circle,
     fit_circle,
+    ransac_circle,
+    refine_circle,
     sphere_fields,
 )
 from vtsbench.recordings.manifest import load_manifest
@@ -95,6 +97,78 @@ def test_fit_circle_exact() -> None:
     t = np.linspace(0, 2 * np.pi, 50, endpoint=False)
     cx, cy, r = fit_circle(12.5 + 7 * np.cos(t), -3 + 7 * np.sin(t))
     assert (cx, cy, r) == pytest.approx((12.5, -3, 7), abs=1e-9)
+
+
+def test_ransac_circle_ignores_outliers_and_respects_the_radius_prior() -> None:
+    rng = np.random.default_rng(3)
+    t = rng.uniform(0, 2 * np.pi, 120)
+    xs, ys = 40.3 + 12.6 * np.cos(t), 31.7 + 12.6 * np.sin(t)
+    xs[:40] = rng.uniform(20, 60, 40)  # a third of the points are outliers
+    ys[:40] = rng.uniform(10, 50, 40)
+    (cx, cy, r), inl = ransac_circle(xs, ys, np.ones(120), r_range=(3, 30), tol=0.5)
+    assert (cx, cy, r) == pytest.approx((40.3, 31.7, 12.6), abs=0.02)  # outliers within tol
+    assert inl[40:].all() and inl[:40].sum() < 8
+    # the prior: a radius range that excludes the circle never returns it
+    other = ransac_circle(xs, ys, np.ones(120), r_range=(20, 30), tol=0.5)
+    assert other is None or 19.5 <= other[0][2] <= 30.5
+    assert ransac_circle(xs[40:], ys[40:], np.ones(80), r_range=(20, 30), tol=0.5) is None
+    assert ransac_circle(xs[:2], ys[:2], np.ones(2), r_range=(3, 30), tol=0.5) is None
+
+
+def test_geometric_refinement_removes_the_algebraic_bias_on_an_arc() -> None:
+    """A contact cut by the image border leaves a quarter of its outline: with noise the
+    algebraic fit shrinks the circle (by 1 px here, on average), the geometric one does not."""
+    rng = np.random.default_rng(0)
+    alg, geo = [], []
+    for _ in range(100):
+        t = np.linspace(0, np.pi / 2, 60)
+        xs = 10 + 20 * np.cos(t) + rng.normal(0, 0.5, 60)
+        ys = -4 + 20 * np.sin(t) + rng.normal(0, 0.5, 60)
+        a = fit_circle(xs, ys)
+        alg.append(a[2] - 20)
+        geo.append(refine_circle(xs, ys, np.ones(60), a)[2] - 20)
+    assert np.mean(alg) < -0.7
+    assert abs(np.mean(geo)) < 0.15
+
+
+def _rendered_press(x: float, y: float, r: float, h: int = 96, w: int = 128,
+                    ss: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """A background and a press whose colour change rises towards the rim (like the slope of
+    a cap) and stops at the circle (x, y, r), anti-aliased by ss x ss supersampling; the
+    light comes from one side, so the change is lopsided."""
+    yy, xx = np.mgrid[:h * ss, :w * ss]
+    xx = (xx + 0.5) / ss - 0.5
+    yy = (yy + 0.5) / ss - 0.5
+    rho = np.hypot(xx - x, yy - y)
+    side = 0.6 + 0.4 * np.cos(np.arctan2(yy - y, xx - x) - 0.7)
+    change = np.where(rho < r, 20 + 60 * (rho / r) ** 2, 0.0) * side
+    change = change.reshape(h, ss, w, ss).mean(axis=(1, 3))
+    bg = np.full((h, w, 3), 110.0)
+    img = bg.copy()
+    img[..., 0] += change
+    img[..., 1] -= 0.5 * change
+    img[..., 2] += 0.3 * change
+    rng = np.random.default_rng(1)
+    img += rng.normal(0, 1.0, img.shape)
+    return bg.astype(np.uint8), np.clip(img, 0, 255).round().astype(np.uint8)
+
+
+@pytest.mark.parametrize("x, y, r", [(60.37, 50.81, 14.6), (41.5, 44.25, 23.3),
+                                     (120.2, 48.6, 18.4)])  # the last one cut by the border
+def test_detect_circle_is_sub_pixel_on_a_known_circle(x, y, r) -> None:
+    bg, img = _rendered_press(x, y, r)
+    cx, cy, cr = detect_circle(img, bg, ball_px=1.2 * r)
+    assert math.hypot(cx - x, cy - y) < 0.35, (cx, cy, cr)
+    assert abs(cr - r) < 0.5, (cx, cy, cr)
+
+
+def test_detect_circle_ignores_a_change_beside_the_contact() -> None:
+    """A bright patch touching the imprint (a fold, a speck of dirt) does not move the circle."""
+    bg, img = _rendered_press(60.37, 50.81, 14.6)
+    img = img.copy()
+    img[30:40, 76:84, 0] = 250  # beside the rim, up and right
+    cx, cy, cr = detect_circle(img, bg, ball_px=18)
+    assert math.hypot(cx - 60.37, cy - 50.81) < 0.5 and abs(cr - 14.6) < 0.6
 
 
 def test_detect_circle_recovers_labelled_circles(sim) -> None:

@@ -475,7 +475,7 @@ def _retry_detection(img: np.ndarray, bg: np.ndarray, ball_px: float
     sup = change_support(img, bg)
     if sup is None:
         return None
-    found = detect_circle(img, bg, start=(sup[0], sup[1], 0.8 * sup[2]))
+    found = detect_circle(img, bg, start=(sup[0], sup[1], 0.8 * sup[2]), ball_px=ball_px)
     if found is None or circle_doubts(found, img, bg, ball_px):
         return None
     return found
@@ -547,7 +547,8 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
         truth = root / e.truth if e.truth else None
         ball = ball_radius_px(float(e.ball_radius_mm), scale)
         label = None if e.circle is None else (e.circle.x, e.circle.y, e.circle.r)
-        found = detect_circle(img, bg) if label is None or circles == "detect" else None
+        found = detect_circle(img, bg, ball_px=ball) if label is None or circles == "detect" \
+            else None
         use, source = (label, "label") if label is not None and circles != "detect" \
             else (found, "detected")
         row: dict[str, Any] = {"id": e.id, "source": source, "label": _circle(label),

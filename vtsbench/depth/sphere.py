@@ -20,9 +20,10 @@ down into a skirt whose shape the sphere does not describe. A circle radius of a
 clamped to it before taking sqrt(R^2 - r^2), so every value is finite.
 
 `detect_circle` finds an unlabelled contact from the difference to the no-contact background:
-blur, threshold above the noise, largest component, then the circle through the strongest change
-along rays from its centre (the colour change is largest where the cap is steepest, at its rim),
-fitted by least squares with outliers dropped.
+blur, threshold above the noise, largest component for a first centre, then sub-pixel edge points
+along rays from it (the steepest fall of the change past its peak: the colour changes most where
+the cap is steepest, at its rim), a RANSAC circle with the ball's size as a prior, and a weighted
+geometric least-squares fit to its inliers.
 """
 
 from __future__ import annotations
@@ -141,57 +142,145 @@ def change_map(image: np.ndarray, background: np.ndarray, sigma: float) -> np.nd
     return cv2.GaussianBlur(d, (0, 0), sigma) if sigma > 0 else d
 
 
-def fit_circle(xs: np.ndarray, ys: np.ndarray) -> tuple[float, float, float]:
-    """Least-squares (algebraic) circle through points: (x, y, r)."""
+def fit_circle(xs: np.ndarray, ys: np.ndarray, weights: np.ndarray | None = None
+               ) -> tuple[float, float, float]:
+    """Least-squares (algebraic, Kasa) circle through points, optionally weighted: (x, y, r)."""
+    xs, ys = np.asarray(xs, np.float64), np.asarray(ys, np.float64)
+    w = np.ones_like(xs) if weights is None else np.sqrt(np.asarray(weights, np.float64))
     xm, ym = xs.mean(), ys.mean()
     u, v = xs - xm, ys - ym
-    a = np.column_stack([u, v, np.ones_like(u)])
-    b = u**2 + v**2
+    a = np.column_stack([u, v, np.ones_like(u)]) * w[:, None]
+    b = (u**2 + v**2) * w
     (c0, c1, c2), *_ = np.linalg.lstsq(a, b, rcond=None)
     cx, cy = c0 / 2, c1 / 2
     r = math.sqrt(max(c2 + cx**2 + cy**2, 0.0))
     return float(cx + xm), float(cy + ym), r
 
 
-def _ray_peaks(m: np.ndarray, cx: float, cy: float, r_max: float, sigma: float,
-               n_rays: int = 120) -> tuple[np.ndarray, np.ndarray]:
-    """Where the change map peaks along rays from (cx, cy), out to r_max: points (xs, ys)."""
+def refine_circle(xs: np.ndarray, ys: np.ndarray, weights: np.ndarray,
+                  circle: tuple[float, float, float], iters: int = 10
+                  ) -> tuple[float, float, float]:
+    """Geometric (orthogonal-distance) weighted least-squares circle by Gauss-Newton, started
+    from `circle`: the algebraic fit is biased towards small radii when the points cover only
+    part of the circle (a contact at the image border)."""
+    cx, cy, r = circle
+    sw = np.sqrt(np.asarray(weights, np.float64))
+    for _ in range(iters):
+        dx, dy = xs - cx, ys - cy
+        d = np.maximum(np.hypot(dx, dy), 1e-9)
+        res = (d - r) * sw
+        jac = np.column_stack([-dx / d, -dy / d, -np.ones_like(d)]) * sw[:, None]
+        step, *_ = np.linalg.lstsq(jac, -res, rcond=None)
+        cx, cy, r = cx + step[0], cy + step[1], r + step[2]
+        if float(np.abs(step).max()) < 1e-4:
+            break
+    return float(cx), float(cy), float(abs(r))
+
+
+def ransac_circle(xs: np.ndarray, ys: np.ndarray, weights: np.ndarray, *,
+                  r_range: tuple[float, float], tol: float, trials: int = 300, seed: int = 0
+                  ) -> tuple[tuple[float, float, float], np.ndarray] | None:
+    """The circle through three edge points that the most weight agrees with (within tol px),
+    its radius inside r_range (the ball's size as a prior); then a weighted geometric fit to
+    its inliers. Returns (circle, inlier mask), or None when no sample gives a circle in range.
+    Deterministic (seeded): the same press gives the same circle."""
+    n = xs.size
+    if n < 3:
+        return None
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, n, size=(trials, 3))
+    p = np.stack([xs[idx], ys[idx]], axis=-1)  # (trials, 3, 2)
+    # circumcentre of each triple
+    ax, ay = p[:, 0, 0], p[:, 0, 1]
+    bx, by = p[:, 1, 0], p[:, 1, 1]
+    qx, qy = p[:, 2, 0], p[:, 2, 1]
+    d = 2 * (ax * (by - qy) + bx * (qy - ay) + qx * (ay - by))
+    ok = np.abs(d) > 1e-6
+    d = np.where(ok, d, 1.0)
+    a2, b2, q2 = ax**2 + ay**2, bx**2 + by**2, qx**2 + qy**2
+    ux = (a2 * (by - qy) + b2 * (qy - ay) + q2 * (ay - by)) / d
+    uy = (a2 * (qx - bx) + b2 * (ax - qx) + q2 * (bx - ax)) / d
+    ur = np.hypot(ax - ux, ay - uy)
+    ok &= (ur >= r_range[0]) & (ur <= r_range[1])
+    if not ok.any():
+        return None
+    ux, uy, ur = ux[ok], uy[ok], ur[ok]
+    res = np.abs(np.hypot(xs[None, :] - ux[:, None], ys[None, :] - uy[:, None]) - ur[:, None])
+    score = ((res <= tol) * weights[None, :]).sum(axis=1)
+    best = int(np.argmax(score))
+    inl = res[best] <= tol
+    if inl.sum() < 3:
+        return None
+    c = fit_circle(xs[inl], ys[inl], weights[inl])
+    for _ in range(2):  # refit and re-collect the inliers of the refined circle
+        c = refine_circle(xs[inl], ys[inl], weights[inl], c)
+        inl = np.abs(np.hypot(xs - c[0], ys - c[1]) - c[2]) <= tol
+        if inl.sum() < 3:
+            return None
+    if not r_range[0] - tol <= c[2] <= r_range[1] + tol:
+        return None
+    return c, inl
+
+
+def _ray_edges(m: np.ndarray, cx: float, cy: float, r_max: float, sigma: float,
+               n_rays: int = 180, step: float = 0.25
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sub-pixel edge points of the colour change along rays from (cx, cy), out to r_max:
+    (xs, ys, weights).
+
+    Along each ray the edge is where the change falls fastest just outside its peak (the
+    colour changes most where the cap is steepest, at its rim; the blur moves the peak itself
+    inwards), placed to a fraction of a sample by a parabola through the steepest drop and its
+    neighbours. The weight is the drop relative to the ray's own peak above the median change
+    (a ray along a dim side of the imprint counts as much as a bright one, a ray through
+    noise little)."""
     import cv2
 
-    radii = np.arange(1.0, r_max, 0.5, dtype=np.float32)
+    radii = np.arange(step, r_max, step, dtype=np.float32)
     ang = np.linspace(0, 2 * np.pi, n_rays, endpoint=False, dtype=np.float32)
     mx = (cx + np.cos(ang)[:, None] * radii[None, :]).astype(np.float32)
     my = (cy + np.sin(ang)[:, None] * radii[None, :]).astype(np.float32)
     vals = cv2.remap(m, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1)
     inside = (mx >= 0) & (mx <= m.shape[1] - 1) & (my >= 0) & (my <= m.shape[0] - 1)
     rows = np.arange(n_rays)
-    k = np.argmax(vals, axis=1)
-    # The edge is where the change falls fastest just past the peak (the blur moves the peak
-    # itself inwards): the steepest descent within 3 blur widths outside it.
-    drop = vals[:, :-1] - vals[:, 1:]
-    span = math.ceil(2 * (3 * sigma + 1))
-    j = np.arange(span)[None, :] + k[:, None]
-    j = np.minimum(j, drop.shape[1] - 1)
+    k = np.argmax(np.where(inside, vals, -np.inf), axis=1)
+    drop = vals[:, :-1] - vals[:, 1:]  # drop[j]: between radii[j] and radii[j + 1]
+    span = max(2, math.ceil((3 * sigma + 1) / step))
+    j = np.minimum(np.arange(span)[None, :] + k[:, None], drop.shape[1] - 1)
     e = j[rows, np.argmax(drop[rows[:, None], j], axis=1)]
-    ok = (inside[rows, k] & (k > 0) & (e < radii.size - 2)
-          & inside[rows, np.minimum(e + 1, radii.size - 1)])
-    ex = (mx[rows, e] + mx[rows, e + 1]) / 2
-    ey = (my[rows, e] + my[rows, e + 1]) / 2
-    return ex[ok], ey[ok]
+    e1 = np.clip(e, 1, drop.shape[1] - 2)
+    a, b, c = drop[rows, e1 - 1], drop[rows, e1], drop[rows, e1 + 1]
+    den = a - 2 * b + c
+    frac = np.where(den < 0, 0.5 * (a - c) / np.where(den < 0, den, -1.0), 0.0)
+    frac = np.clip(frac, -0.5, 0.5)
+    r_edge = (radii[e1] + radii[e1 + 1]) / 2 + frac * step
+    base = float(np.median(m))
+    height = vals[rows, k] - base
+    w = np.where(height > 0, b / np.maximum(height, 1e-6), 0.0)
+    ok = (inside[rows, k] & (k > 0) & (e1 + 2 < radii.size)
+          & inside[rows, np.minimum(e1 + 2, radii.size - 1)] & (w > 0) & (b > 0))
+    ex = cx + np.cos(ang) * r_edge
+    ey = cy + np.sin(ang) * r_edge
+    return ex[ok].astype(np.float64), ey[ok].astype(np.float64), w[ok].astype(np.float64)
 
 
 def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | None = None,
                   min_radius_px: float = 3.0,
-                  start: tuple[float, float, float] | None = None
+                  start: tuple[float, float, float] | None = None,
+                  ball_px: float | None = None
                   ) -> tuple[float, float, float] | None:
     """The contact circle (x, y, r) px of a ball press, or None when no contact is visible.
 
     Blur the change to the background, keep what stands clearly above the noise (6 robust
     standard deviations and a fifth of the strongest change), take the convex hull of the
-    largest connected component (the flat top of the cap barely changes colour), then fit a
-    circle to the peak of the change along rays from its centroid, twice, dropping rays more
-    than 2.5 robust deviations off the circle. start: a first guess (x, y, r) instead of the
-    component (what calibration retries with when the first circle fails its check).
+    largest connected component (the flat top of the cap barely changes colour) for a first
+    centre and size, then find sub-pixel edge points along rays from the centre (`_ray_edges`)
+    and fit a circle to them: RANSAC against rays that cross a shadow or a neighbouring
+    change, then a weighted geometric least-squares fit to the inliers, three times from the
+    new centre. ball_px (the ball radius in pixels, from the scale) bounds the radius at two
+    ball radii (loose: a wrong scale is then reported by the circle's check, not as a missing
+    contact). start: a first guess (x, y, r) instead of the component (what calibration
+    retries with when the first circle fails its check).
     """
     import cv2
 
@@ -200,7 +289,7 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
         sigma = max(1.0, min(h, w) / 240)
     m = change_map(image, background, sigma)
     if start is not None:
-        return _fit_rays(m, *start, sigma, min_radius_px)
+        return _fit_rays(m, *start, sigma, min_radius_px, ball_px)
     med = float(np.median(m))
     mad = float(np.median(np.abs(m - med))) * 1.4826 + 1e-3
     peak = float(np.percentile(m, 99.99))
@@ -220,28 +309,27 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     area = int(comp.sum())
     ys, xs = np.nonzero(comp)
     return _fit_rays(m, float(xs.mean()), float(ys.mean()), math.sqrt(area / math.pi), sigma,
-                     min_radius_px)
+                     min_radius_px, ball_px)
 
 
 def _fit_rays(m: np.ndarray, cx: float, cy: float, r0: float, sigma: float,
-              min_radius_px: float) -> tuple[float, float, float] | None:
+              min_radius_px: float, ball_px: float | None = None
+              ) -> tuple[float, float, float] | None:
     """Fit the circle to the edges found along rays from (cx, cy), three times (see
     detect_circle)."""
     h, w = m.shape
     r = r0
+    r_hi = 2.0 * ball_px if ball_px else float(max(h, w))
     for _ in range(3):
-        px, py = _ray_peaks(m, cx, cy, 1.5 * max(r0, r), sigma)
+        px, py, wt = _ray_edges(m, cx, cy, 1.5 * max(r0, r), sigma)
         if px.size < 12:
             return None
-        for _ in range(2):
-            cx2, cy2, r2 = fit_circle(px, py)
-            res = np.abs(np.hypot(px - cx2, py - cy2) - r2)
-            keep = res <= max(2.5 * 1.4826 * float(np.median(res)), 1.0)
-            if keep.sum() < 12:
-                break
-            px, py = px[keep], py[keep]
-        cx, cy, r = fit_circle(px, py)
-    if not (r >= min_radius_px and 0 <= cx < w and 0 <= cy < h):
+        tol = max(1.0, 0.06 * r)
+        found = ransac_circle(px, py, wt, r_range=(min_radius_px, r_hi), tol=tol)
+        if found is None or found[1].sum() < 12:
+            return None
+        cx, cy, r = found[0]
+    if not (min_radius_px <= r <= r_hi and 0 <= cx < w and 0 <= cy < h):
         return None
     return cx, cy, r
 
@@ -249,10 +337,10 @@ def _fit_rays(m: np.ndarray, cx: float, cy: float, r0: float, sigma: float,
 # -- self-check of a contact circle ------------------------------------------------------------
 
 #: A circle is doubted when its radius is outside [SUPPORT_LOW, SUPPORT_HIGH] times the radius
-#: of the area whose colour change stands above the noise (measured: good circles at 0.49-0.63
-#: of it on DIGIT presses, which have a wide skirt, 0.72-1.02 on Taxim's GelSight, its labels up
-#: to 1.32; the wrong detections at 0.15 and 0.31), or when less than COVER_MIN of its disc
-#: shows a change (a centre off the imprint).
+#: of the area whose colour change stands above the noise (measured: good circles at 0.50-0.63
+#: of it on DIGIT presses, which have a wide skirt, 0.72-1.22 on Taxim's GelSight, its labels up
+#: to 1.32; the wrong detection, DIGIT 0008's first, at 0.17), or when less than COVER_MIN of
+#: its disc shows a change (a centre off the imprint).
 SUPPORT_LOW, SUPPORT_HIGH = 0.4, 1.6
 COVER_MIN = 0.5
 
