@@ -15,6 +15,7 @@ import csv
 import importlib
 import importlib.util
 import json
+import math
 import sys
 from collections.abc import Iterable
 from pathlib import Path
@@ -126,23 +127,32 @@ def load_config(recipe: Any, path: str | Path | None) -> dict[str, Any]:
     config = dict(recipe.default_config())
     if path is None:
         return config
-    path = Path(path)
-    try:
-        if path.suffix == ".toml":
-            import tomllib
+    from .jsonio import loads, read_bytes
 
-            given = tomllib.loads(path.read_text())
-        else:
-            given = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise VtsError("config file not found", path) from None
-    except ValueError as e:
-        raise VtsError(f"config is not valid ({e})", path) from None
+    path = Path(path)
+    data = read_bytes(path, "config file", 16 << 20)
+    if path.suffix == ".toml":
+        import tomllib
+
+        try:
+            given = tomllib.loads(data.decode("utf-8"))
+        except (ValueError, RecursionError) as e:
+            raise VtsError(f"config is not valid TOML ({str(e)[:100]})", path) from None
+    else:
+        given = loads(data, path, "config JSON")
     if not isinstance(given, dict):
         raise VtsError("config must be a mapping of option names to values", path)
     unknown = sorted(set(given) - set(config))
     if unknown:
         raise VtsError(f"unknown config keys {unknown} (known: {sorted(config)})", path)
+    for key, value in given.items():
+        want = config[key]
+        ok = (isinstance(value, type(want)) or want is None
+              or (isinstance(want, float) and isinstance(value, int)))
+        if not ok or (isinstance(value, bool) and not isinstance(want, bool)) or (
+                isinstance(value, float) and not math.isfinite(value)):
+            raise VtsError(f"config key {key!r}: expected a {type(want).__name__} like "
+                           f"{want!r}, got {value!r}", path)
     config.update(given)
     return config
 

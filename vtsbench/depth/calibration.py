@@ -224,11 +224,9 @@ def _header(data: bytes, path: Path) -> dict[str, Any]:
             raise VtsError(f"truncated calibration file ({len(data)} bytes, its header alone "
                            f"promises {8 + n})", path)
         raise VtsError("not a vtsbench calibration file (no safetensors header)", path)
-    try:
-        head = json.loads(data[8:8 + n].decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError):
-        raise VtsError("not a vtsbench calibration file (unreadable safetensors header)",
-                       path) from None
+    from ..jsonio import loads
+
+    head = loads(data[8:8 + n], path, "safetensors header")
     if not isinstance(head, dict):
         raise VtsError("not a vtsbench calibration file (unreadable safetensors header)", path)
     end = max((int(v["data_offsets"][1]) for k, v in head.items()
@@ -242,10 +240,11 @@ def _header(data: bytes, path: Path) -> dict[str, Any]:
 
 def metadata_errors(meta: Any) -> list[str]:
     """Every violation of the calibration metadata schema, one line each."""
-    import jsonschema
 
     schema = json.loads(SCHEMA_PATH.read_text())
-    v = jsonschema.Draft202012Validator(schema)
+    from ..jsonio import strict_validator
+
+    v = strict_validator(schema)
     out = []
     for err in sorted(v.iter_errors(meta), key=lambda e: list(map(str, e.absolute_path))):
         where = ".".join(map(str, err.absolute_path)) or "(top level)"
@@ -265,16 +264,15 @@ def load_calibration(path: str | Path, *, sensor: str | None = None,
     path = Path(path)
     if not path.is_file():
         raise VtsError("calibration file not found", path)
-    data = path.read_bytes()
+    from ..jsonio import loads, read_bytes
+
+    data = read_bytes(path, "calibration file")
     head = _header(data, path)
     raw = (head.get("__metadata__") or {}).get(META_KEY)
     if raw is None:
         raise VtsError("not a vtsbench calibration file (safetensors without vtsbench metadata)",
                        path)
-    try:
-        meta = json.loads(raw)
-    except json.JSONDecodeError:
-        raise VtsError("corrupt calibration file (its metadata is not JSON)", path) from None
+    meta = loads(raw, path, "calibration metadata") if isinstance(raw, str) else raw
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise VtsError(f"not a vtsbench calibration file (format {meta.get('format')!r})"
                        if isinstance(meta, dict) else "not a vtsbench calibration file", path)

@@ -38,7 +38,6 @@ def _slug(text: str) -> str:
 
 def entry_schema_errors(doc: Any) -> list[str]:
     """Violations of schemas/leaderboard_entry.schema.json (which refers to metrics.schema)."""
-    import jsonschema
     from referencing import Registry, Resource
 
     from ..dataset.schema import SCHEMA_DIR
@@ -46,7 +45,9 @@ def entry_schema_errors(doc: Any) -> list[str]:
     sch = json.loads((SCHEMA_DIR / "leaderboard_entry.schema.json").read_text())
     ms = json.loads((SCHEMA_DIR / "metrics.schema.json").read_text())
     reg = Registry().with_resource(ms["$id"], Resource.from_contents(ms))
-    v = jsonschema.Draft202012Validator(sch, registry=reg)
+    from ..jsonio import strict_validator
+
+    v = strict_validator(sch, registry=reg)
     return [f"{'.'.join(map(str, e.absolute_path)) or '(top level)'}: {e.message}"
             for e in v.iter_errors(doc)]
 
@@ -73,7 +74,7 @@ def add(submission: str | Path, dataset: str | Path, split: str, part: str = "te
             t: {str(s): a.tolist() for s, a in by.items()} for t, by in sub.preds.items()}},
     }
     folder.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(path, json.dumps(entry, indent=1) + "\n")
+    write_text_atomic(path, json.dumps(entry, indent=1, allow_nan=False) + "\n")
     return path
 
 
@@ -81,10 +82,9 @@ def entries(folder: Path) -> list[tuple[Path, dict[str, Any]]]:
     """The entries of one dataset/split folder, each checked against its schema."""
     out = []
     for p in sorted(folder.glob("*.json")):
-        try:
-            doc = json.loads(p.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError) as e:
-            raise VtsError(f"unreadable leaderboard entry ({e})", p) from None
+        from ..jsonio import read_json
+
+        doc = read_json(p, "leaderboard entry")
         errs = entry_schema_errors(doc)
         if errs:
             raise VtsError(f"invalid leaderboard entry: {errs[0]}", p)

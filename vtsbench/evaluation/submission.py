@@ -191,11 +191,9 @@ def read_meta(path: Path) -> dict[str, Any]:
     if not path.is_file():
         raise VtsError("metadata file not found (write it beside the submission as "
                        f"{path.name} or pass --meta)", path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise VtsError(f"metadata is not valid JSON ({e})", path) from None
-    return doc
+    from ..jsonio import read_json
+
+    return read_json(path, "metadata JSON")
 
 
 def schema_errors(doc: Any, at: str) -> list[str]:
@@ -203,11 +201,12 @@ def schema_errors(doc: Any, at: str) -> list[str]:
     from ..dataset import schema as ds
 
     doc_schema = json.loads((ds.SCHEMA_DIR / "submission.schema.json").read_text())
-    import jsonschema
 
     sch = {"$schema": doc_schema["$schema"], "$defs": doc_schema["$defs"],
            "$ref": f"#/$defs/{at}"}
-    v = jsonschema.Draft202012Validator(sch)
+    from ..jsonio import strict_validator
+
+    v = strict_validator(sch)
     return [f"{'.'.join(map(str, e.absolute_path)) or '(top level)'}: {e.message}"
             for e in v.iter_errors(doc)]
 
