@@ -561,11 +561,12 @@ def predict(
     """
     import time
 
-    from .recipes import load_recipe, write_submission
+    from .recipes import check_checkpoint, load_recipe, write_submission
 
     rec = _run(load_recipe, recipe)
     if not checkpoint.exists():
         _fail(FileNotFoundError(f"checkpoint not found: {checkpoint}"))
+    _run(check_checkpoint, checkpoint)
     t0 = time.perf_counter()
     rows = _run(rec.predict, checkpoint, dataset, split, part, device=device)
     wall = time.perf_counter() - t0

@@ -84,8 +84,8 @@ def read_bytes(path: str | os.PathLike, what: str = "file", limit: int = MAX_FIL
     """The bytes of a regular file of bounded size; one-line VtsError otherwise."""
     path = regular_file(path, what, limit)
     try:
-        with open(path, "rb") as fh:
-            data = fh.read(limit + 1)
+        with open(path, "rb") as fh:  # the size told by stat, +1 to see a file that grew
+            data = fh.read(min(limit, os.fstat(fh.fileno()).st_size) + 1)
     except OSError as e:
         raise VtsError(f"cannot read {what} ({e.strerror or e})", path) from None
     if len(data) > limit:
@@ -110,3 +110,34 @@ def strict_validator(schema: dict[str, Any], **kwargs: Any) -> Any:
     checker = jsonschema.Draft202012Validator.TYPE_CHECKER.redefine("integer", is_int)
     cls = jsonschema.validators.extend(jsonschema.Draft202012Validator, type_checker=checker)
     return cls(schema, **kwargs)
+
+
+def read_csv(path: str | os.PathLike, what: str = "CSV file", limit: int = 1 << 30
+             ) -> list[list[str]]:
+    """The non-empty rows of a CSV file (csv module, fields up to its 128 KiB limit); a header
+    with a repeated or empty column name, an over-long field, bad UTF-8 or a NUL byte is one
+    VtsError naming the file (a repeated name would shift every column after it)."""
+    import csv
+    import io
+
+    data = read_bytes(path, what, limit)
+    try:
+        text = data.decode("utf-8-sig")
+        rows = [r for r in csv.reader(io.StringIO(text, newline=""))
+                if r and any(c.strip() for c in r)]
+    except UnicodeDecodeError as e:
+        raise VtsError(f"{what} is not UTF-8 text ({e.reason})", path) from None
+    except csv.Error as e:
+        raise VtsError(f"unreadable {what} ({e})", path) from None
+    if rows:
+        names = [h.strip() for h in rows[0]]
+        seen: set[str] = set()
+        for i, n in enumerate(names, start=1):
+            if not n:
+                raise VtsError(f"{what}: column {i} of the header has no name", path)
+            if n.lower() in seen:
+                raise VtsError(f"{what}: column name {n!r} appears more than once in the "
+                               "header", path)
+            seen.add(n.lower())
+        rows[0] = names
+    return rows

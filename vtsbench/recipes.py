@@ -80,6 +80,9 @@ def _from_file(path: Path) -> Any:
     sys.modules[mod_name] = module
     try:
         spec.loader.exec_module(module)
+    except ModuleNotFoundError as e:
+        sys.modules.pop(mod_name, None)
+        raise VtsError(_needs(e), path) from None
     except Exception:
         sys.modules.pop(mod_name, None)
         raise
@@ -101,6 +104,13 @@ def _builtin_file(name: str) -> Path | None:
     return path if path.is_file() else None
 
 
+def _needs(e: ModuleNotFoundError) -> str:
+    """The one-line reason of a recipe that imports a package that is not installed."""
+    extra = " (pip install 'vtsbench[torch]')" if (e.name or "").split(".")[0] in (
+        "torch", "torchvision", "transformers") else ""
+    return f"the recipe needs the Python package {e.name!r}, which is not installed{extra}"
+
+
 def load_recipe(name_or_path: str | Path) -> Any:
     """A recipe from a .py file defining RECIPE, or by its registered name."""
     text = str(name_or_path)
@@ -108,10 +118,15 @@ def load_recipe(name_or_path: str | Path) -> Any:
         return _from_file(Path(text))
     eps = registered()
     if text in eps:
-        return _check(eps[text].load(), f"entry point {text}")
+        try:
+            return _check(eps[text].load(), f"entry point {text}")
+        except ModuleNotFoundError as e:
+            raise VtsError(_needs(e), f"recipe {text}") from None
     try:
         module = importlib.import_module(f"recipes.{text}")
-    except ModuleNotFoundError:
+    except ModuleNotFoundError as e:
+        if e.name and not e.name.startswith("recipes"):
+            raise VtsError(_needs(e), f"recipe {text}") from None
         module = None
     if module is not None and hasattr(module, "RECIPE"):
         return _check(module.RECIPE, f"recipes.{text}")
@@ -120,6 +135,39 @@ def load_recipe(name_or_path: str | Path) -> Any:
         return _from_file(path)
     known = ", ".join(sorted(eps)) or "none"
     raise VtsError(f"unknown recipe {text!r} (registered: {known}; or give a path to a .py file)")
+
+
+def check_checkpoint(path: str | Path) -> Path:
+    """A checkpoint a recipe can open: a regular file; a .safetensors one whose header and JSON
+    metadata values parse (each through the same limits as every user JSON), a .json one that
+    parses; else a one-line VtsError. Other formats are the recipe's to read."""
+    from .jsonio import loads, read_bytes, read_json, regular_file
+
+    path = Path(path)
+    if path.suffix == ".json":
+        read_json(path, "checkpoint")
+    if path.suffix != ".safetensors":
+        return regular_file(path, "checkpoint")
+    data = read_bytes(path, "checkpoint", 1 << 40)
+    n = int.from_bytes(data[:8], "little") if len(data) >= 8 else 0
+    if not 0 < n <= len(data) - 8:
+        raise VtsError("not a safetensors checkpoint (no header)", path)
+    head = loads(data[8:8 + n], path, "checkpoint header")
+    if not isinstance(head, dict):
+        raise VtsError("not a safetensors checkpoint (header is not a mapping)", path)
+    meta = head.get("__metadata__") or {}
+    if not isinstance(meta, dict):
+        raise VtsError("not a safetensors checkpoint (metadata is not a mapping)", path)
+    for key, value in meta.items():
+        if isinstance(value, str) and value[:1] in "{[":
+            loads(value, path, f"checkpoint metadata {key!r}")
+    try:
+        from safetensors.numpy import load
+
+        load(data)
+    except Exception as e:  # safetensors' own error type for damaged data
+        raise VtsError(f"corrupt checkpoint ({str(e).splitlines()[0][:100]})", path) from None
+    return path
 
 
 def load_config(recipe: Any, path: str | Path | None) -> dict[str, Any]:

@@ -448,7 +448,10 @@ class View:
                  frames: int | None = None, transform: Any = None,
                  targets: Sequence[str] = ()) -> torch.utils.data.Dataset:
         """A torch Dataset of (tensor, target dict); see vtsbench.dataset.torch_dataset."""
-        from .torch_dataset import TorchView
+        try:
+            from .torch_dataset import TorchView
+        except ModuleNotFoundError as e:
+            raise VtsError(f"to_torch needs {e.name!r}: pip install 'vtsbench[torch]'") from None
 
         return TorchView(self, modality=modality, size=size, frames=frames, transform=transform,
                          targets=targets)

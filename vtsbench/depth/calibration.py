@@ -294,6 +294,10 @@ def load_calibration(path: str | Path, *, sensor: str | None = None,
         tensors = load(data)
     except Exception as e:  # safetensors raises its own error type for damaged data
         raise VtsError(f"corrupt calibration file ({str(e).splitlines()[0]})", path) from None
+    for name, arr in tensors.items():  # a NaN coefficient would turn every depth into zeros
+        if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+            raise VtsError(f"corrupt calibration file (tensor {name!r} holds NaN or infinity)",
+                           path)
     bg, zero = tensors.pop("background", None), tensors.pop("zero_map", None)
     if bg is None or bg.dtype != np.uint8 or bg.shape != (*res, 3):
         raise VtsError(f"corrupt calibration file (background missing or not {res[0]}x{res[1]}"

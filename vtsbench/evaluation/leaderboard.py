@@ -56,6 +56,10 @@ def add(submission: str | Path, dataset: str | Path, split: str, part: str = "te
         root: str | Path = "leaderboards", meta: str | Path | None = None,
         replace: bool = False) -> Path:
     """Score a submission and store it as a leaderboard entry; returns the entry's path."""
+    for what, name in (("split", split), ("part", part)):
+        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,99}", name) or ".." in name:
+            raise VtsError(f"{what} name {name!r} must be letters, digits, '_', '-' or '.' "
+                           "(no path)")
     doc, sub, truth = evaluate(submission, dataset, split, part, meta=meta)
     folder = Path(root) / _slug(truth.dataset) / split
     eid = f"{_slug(str(sub.meta['method']))}-{sub.sha256[:8]}"
@@ -175,9 +179,17 @@ def _summary_columns(kind: str) -> list[Column]:
     return [*head, ("metric version", lambda e: e["metric_version"])]
 
 
+def md_cell(value: Any) -> str:
+    """A table cell of user text: one line, markdown and HTML characters escaped, so a method
+    name cannot add rows, links or markup to leaderboard.md."""
+    text = " ".join(str(value).split())
+    text = re.sub(r"([\\`*_\[\]|])", r"\\\1", text)
+    return text.replace("<", "&lt;").replace(">", "&gt;")[:200]
+
+
 def _table(cols: list[Column], rows: list[dict[str, Any]]) -> list[str]:
     out = ["| " + " | ".join(c for c, _ in cols) + " |", "|---" * len(cols) + "|"]
-    return out + ["| " + " | ".join(str(f(r)).replace("|", "/") for _, f in cols) + " |"
+    return out + ["| " + " | ".join(md_cell(f(r)) for _, f in cols) + " |"
                   for r in rows]
 
 
@@ -190,7 +202,8 @@ def render_folder(folder: Path) -> str:
     main = "state" if kind == "slip" else "object"
     es.sort(key=lambda e: -(_mean(e, main, "accuracy") or -1.0))
     split = es[0]["split"]
-    lines = [f"# {es[0]['dataset']['name']} / {split} ({es[0]['part']})", "",
+    lines = [f"# {md_cell(es[0]['dataset']['name'])} / {md_cell(split)} "
+             f"({md_cell(es[0]['part'])})", "",
              f"{len(es)} entries, best {main} accuracy first; mean ± standard deviation over "
              "seeds where there are several.", ""]
     cols = _summary_columns(kind)

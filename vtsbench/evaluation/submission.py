@@ -10,7 +10,6 @@ recipe, seeds, dataset version and checksum, vtsbench version
 
 from __future__ import annotations
 
-import csv
 import hashlib
 import json
 import math
@@ -131,29 +130,29 @@ def default_meta_path(path: Path) -> Path:
 
 def read_rows(path: Path) -> dict[str, list[Any]]:
     """Columns of a CSV or parquet submission (CSV values as text)."""
+    from ..jsonio import read_csv, regular_file
+
     if not path.is_file():
         raise VtsError("submission not found", path)
     if path.suffix.lower() == ".parquet":
         import pyarrow.parquet as pq
 
+        regular_file(path, "submission")
         try:
-            return pq.read_table(path).to_pydict()
+            table = pq.read_table(path)
         except Exception as e:
             raise VtsError(f"not a readable parquet file ({type(e).__name__})", path) from None
-    try:
-        with path.open(newline="", encoding="utf-8-sig") as fh:
-            reader = csv.reader(fh)
-            header = next(reader, None)
-            body = list(reader)
-    except UnicodeDecodeError as e:
-        raise VtsError(f"not UTF-8 text ({e.reason})", path) from None
-    if header is None:
+        names = [n.strip().lower() for n in table.column_names]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise VtsError(f"column name {dup[0]!r} appears more than once", path)
+        return table.to_pydict()
+    rows = read_csv(path, "submission CSV")
+    if not rows:
         return {}
-    header = [h.strip() for h in header]
+    header, body = rows[0], rows[1:]
     cols: dict[str, list[Any]] = {h: [] for h in header}
     for r in body:
-        if not r:
-            continue
         for h, v in zip(header, r + [""] * (len(header) - len(r)), strict=False):
             cols[h].append(v)
     return cols
