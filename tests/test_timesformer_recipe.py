@@ -58,7 +58,7 @@ def test_timesformer_rows_for_every_sample(vts_dataset: Path, tmp_path: Path) ->
 def test_delta_input_and_input_modes() -> None:
     import torch
 
-    from recipes.timesformer import _normalize, input_mode
+    from vtsbench.recipes_builtin.timesformer import _normalize, input_mode
 
     x = torch.rand(2, 4, 3, 8, 8)
     small = {"config": "small", "modality": "rgb", "depth_scale_mm": 1.0, "input": None,

@@ -525,7 +525,7 @@ def train(
 ) -> None:
     """Train a recipe on a split's train part; prints the checkpoint path.
 
-    Example: [bold]vtsbench train recipes/flow.py --dataset data/ds --split unseen_objects --out
+    Example: [bold]vtsbench train flow --dataset data/ds --split unseen_objects --out
     runs/flow[/]
     """
     import json
@@ -556,7 +556,7 @@ def predict(
 ) -> None:
     """Predict a split part with a trained recipe; writes a submission vtsbench eval accepts.
 
-    Example: [bold]vtsbench predict recipes/flow.py runs/flow/checkpoint.safetensors --dataset
+    Example: [bold]vtsbench predict flow runs/flow/checkpoint.safetensors --dataset
     data/ds --split unseen_objects --out flow.csv[/]
     """
     import time

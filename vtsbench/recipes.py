@@ -99,8 +99,8 @@ def registered() -> dict[str, Any]:
 
 
 def _builtin_file(name: str) -> Path | None:
-    """recipes/NAME.py of a source checkout (when the installed metadata predates it)."""
-    path = Path(__file__).resolve().parents[1] / "recipes" / f"{name}.py"
+    """vtsbench/recipes_builtin/NAME.py (when the installed metadata predates it)."""
+    path = Path(__file__).resolve().parent / "recipes_builtin" / f"{name}.py"
     return path if path.is_file() else None
 
 
@@ -121,15 +121,16 @@ def load_recipe(name_or_path: str | Path) -> Any:
         try:
             return _check(eps[text].load(), f"entry point {text}")
         except ModuleNotFoundError as e:
-            raise VtsError(_needs(e), f"recipe {text}") from None
+            if not eps[text].module.startswith(e.name or "\0"):  # else stale metadata: below
+                raise VtsError(_needs(e), f"recipe {text}") from None
     try:
-        module = importlib.import_module(f"recipes.{text}")
+        module = importlib.import_module(f"vtsbench.recipes_builtin.{text}")
     except ModuleNotFoundError as e:
-        if e.name and not e.name.startswith("recipes"):
+        if e.name and not e.name.startswith("vtsbench.recipes_builtin"):
             raise VtsError(_needs(e), f"recipe {text}") from None
         module = None
     if module is not None and hasattr(module, "RECIPE"):
-        return _check(module.RECIPE, f"recipes.{text}")
+        return _check(module.RECIPE, f"vtsbench.recipes_builtin.{text}")
     path = _builtin_file(text)
     if path is not None:
         return _from_file(path)
