@@ -73,8 +73,7 @@ def regular_file(path: str | os.PathLike, what: str = "file",
     if stat.S_ISDIR(st.st_mode):
         raise VtsError(f"is a folder, not a {what}", path)
     if not stat.S_ISREG(st.st_mode):
-        raise VtsError(f"not a regular file (a pipe, device or socket), refused as a {what}",
-                       path)
+        raise VtsError(f"not a regular file but a pipe, device or socket ({what} expected)", path)
     if st.st_size > limit:
         raise VtsError(f"{what} of {st.st_size} bytes is over the limit of {limit}", path)
     return path

@@ -99,6 +99,16 @@ class StrictStore(WrapperStore):
         return type(self)(store, self.location)
 
     async def get(self, key: str, prototype: Any, byte_range: Any = None) -> Any:
+        if "://" not in self.location:  # a local file must be a regular one of bounded size
+            import stat
+
+            try:
+                st = os.stat(Path(self.location) / key)
+            except OSError:
+                st = None
+            if st is not None and (not stat.S_ISREG(st.st_mode) or st.st_size > 4 << 30):
+                raise VtsError("not a regular file of at most 4 GiB (a link to a device?)",
+                               f"{self.location}/{key}")
         buf = await self._store.get(key, prototype, byte_range)
         if buf is None and "/c/" in key:
             raise VtsError("missing (an incomplete copy of the dataset?)",
@@ -151,7 +161,12 @@ class KindStore:
                 group = store.open_group(self.loc.url, self.kind, self.loc.storage_options)
                 strict = StrictStore(group.store, store.group_location(self.loc.url, self.kind))
                 self._group = zarr.open_group(strict, mode="r", use_consolidated=True)
-            arr = self._group[name]
+            try:
+                arr = self._group[name]
+            except Exception as e:  # a changed zarr.json
+                raise VtsError(f"cannot open the array ({type(e).__name__}); run `vtsbench "
+                               "verify`", f"{store.group_location(self.loc.url, self.kind)}/"
+                               f"{name}") from None
             self._agrees(name, arr)
             self._arrays[name] = arr
         return self._arrays[name]

@@ -195,6 +195,10 @@ def check_arrays(root: Path, info: DatasetInfo, index: dict[str, list[SampleMeta
             except KeyError:
                 report.problems.append(f"{where}/{name}: array missing")
                 continue
+            except Exception as e:  # metadata zarr cannot use (a changed zarr.json)
+                report.problems.append(f"{where}/{name}: cannot open the array "
+                                       f"({type(e).__name__}: {_reason(e)})")
+                continue
             want = tuple(info.shapes.get(kind, {}).get(name, ()))
             bad = []
             if tuple(arr.shape) != want:

@@ -183,7 +183,7 @@ def md_cell(value: Any) -> str:
     """A table cell of user text: one line, markdown and HTML characters escaped, so a method
     name cannot add rows, links or markup to leaderboard.md."""
     text = " ".join(str(value).split())
-    text = re.sub(r"([\\`*_\[\]|])", r"\\\1", text)
+    text = re.sub(r"([\\`*|])", r"\\\1", text).replace("](", "]\\(").replace("][", "]\\[")
     return text.replace("<", "&lt;").replace(">", "&gt;")[:200]
 
 
