@@ -28,7 +28,7 @@ class Summary:
 
 def summarise(root: str | Path) -> Summary:
     """Read info.json and the indexes of a dataset folder (no arrays)."""
-    import pyarrow.parquet as pq
+    from .index import read_parquet
 
     root = Path(root)
     info = load_info(root)
@@ -37,7 +37,7 @@ def summarise(root: str | Path) -> Summary:
         path = root / "index" / f"{kind}.parquet"
         if not path.is_file():
             continue
-        t = pq.read_table(path, columns=["object", "state"] if kind == "slip" else ["object"])
+        t = read_parquet(path, ["object", "state"] if kind == "slip" else ["object"])
         d = t.to_pydict()
         for i, obj in enumerate(d["object"]):
             key = "static" if kind == "static" else f"slip:{d['state'][i] or 'unknown'}"

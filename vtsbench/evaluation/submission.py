@@ -54,7 +54,6 @@ class Truth:
 
 def load_truth(dataset: str | Path, split: str, part: str = "test") -> Truth:
     """Labels of a split part from info.json, the split file and the index (no arrays read)."""
-    import pyarrow.parquet as pq
 
     from ..dataset.schema import load_info
     from ..dataset.splits import read_split
@@ -71,7 +70,9 @@ def load_truth(dataset: str | Path, split: str, part: str = "test") -> Truth:
     cols = ["sample_id", "object", "class_idx"]
     if sp.kind == "slip":
         cols += ["state_idx", "direction"]
-    table = pq.read_table(root / "index" / f"{sp.kind}.parquet", columns=cols).to_pydict()
+    from ..dataset.index import read_parquet
+
+    table = read_parquet(root / "index" / f"{sp.kind}.parquet", cols).to_pydict()
     pos = {s: i for i, s in enumerate(table["sample_id"])}
     ids = sorted(sp.parts[part])
     rows = [pos[s] for s in ids if s in pos]

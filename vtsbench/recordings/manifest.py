@@ -326,8 +326,8 @@ def save_manifest(folder: str | Path, manifest: Manifest) -> Path:
 
     doc = manifest.to_dict()
     errs = schema_errors(doc)
-    if errs:
-        raise ValueError(f"refusing to write an invalid manifest: {errs[0]}")
     path = Path(folder) / MANIFEST_NAME
+    if errs:  # options that make an invalid manifest (a negative radius, a session '../x'...)
+        raise VtsError(f"refusing to write an invalid manifest: {errs[0]}", path)
     write_text_atomic(path, manifest.to_json())
     return path
