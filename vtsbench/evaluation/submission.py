@@ -27,7 +27,9 @@ from ..labels import DIRECTION_NAMES, STATES
 TASKS = {"state": "slip", "direction": "slip", "object": "static"}
 SLIP = STATES.index("slip")
 MAX_SHOWN = 3
-_INT = re.compile(r"[+-]?\d+")
+#: An integer of at most 18 digits: longer is no class index or seed (and int() of thousands
+#: of digits raises)
+_INT = re.compile(r"[+-]?\d{1,18}")
 
 
 @dataclass
