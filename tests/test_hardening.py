@@ -109,6 +109,8 @@ def test_format_1_0_info_without_its_hash_still_loads(ds: Path) -> None:
     (ds / "meta" / "info.json").write_text(info.to_json())
     assert "info_sha256" not in (ds / "meta" / "info.json").read_text()
     assert load_info(ds).format_version == "1.0"
+    res = run("verify", ds, "--quick")
+    assert res.exit_code == 0 and "carries no info_sha256" in res.output, res.output
 
 
 # -- 2: repeated column names ------------------------------------------------------------------

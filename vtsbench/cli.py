@@ -302,7 +302,7 @@ def verify(
     from .dataset.verify import verify as run_verify
 
     report = _run(run_verify, dataset, decode=not quick, progress=True)
-    _report(report.problems, [], f"{report.files} files, {report.samples} samples, "
+    _report(report.problems, report.warnings, f"{report.files} files, {report.samples} samples, "
             f"{report.shards} shards checked: {len(report.problems)} problem(s)")
 
 
