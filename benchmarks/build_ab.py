@@ -13,10 +13,8 @@ frames and 60 sequences of 8 frames at 480x640 and calibrates them (lut) in a te
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
 import platform
-import re
 import shutil
 import statistics
 import subprocess
@@ -75,10 +73,9 @@ def main() -> None:
                 print(f"round {r + 1} {name}: {n} frames in {s:.1f} s, {n / s:.1f} frames/s",
                       flush=True)
         med = {k: statistics.median(v) for k, v in runs.items()}
-        cpu = platform.processor() or platform.machine()
-        with contextlib.suppress(OSError, AttributeError):
-            cpu = re.search(r"model name\s*:\s*(.*)", Path("/proc/cpuinfo").read_text()).group(1)
-        print(f"\n{os.cpu_count()} cores, {cpu}, Python {platform.python_version()}; {n} frames, "
+        from build import machine  # benchmarks/build.py: cores and CPU model
+
+        print(f"\n{machine()}, Python {platform.python_version()}; {n} frames, "
               f"{a.workers} worker(s), {a.rounds} alternated rounds")
         print("| code | frames/s (median) | runs |\n|---|---:|---|")
         for k in ("old", "this"):
