@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import shutil
 import statistics
 import subprocess
@@ -75,7 +74,7 @@ def main() -> None:
         med = {k: statistics.median(v) for k, v in runs.items()}
         from build import machine  # benchmarks/build.py: cores and CPU model
 
-        print(f"\n{machine()}, Python {platform.python_version()}; {n} frames, "
+        print(f"\n{machine()}; {n} frames, "
               f"{a.workers} worker(s), {a.rounds} alternated rounds")
         print("| code | frames/s (median) | runs |\n|---|---:|---|")
         for k in ("old", "this"):
