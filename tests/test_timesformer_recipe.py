@@ -13,7 +13,7 @@ from vtsbench.recipes import load_recipe
 
 pytest_plugins = ["loader_conftest"]
 
-RECIPE = Path(__file__).resolve().parents[1] / "recipes" / "timesformer.py"
+RECIPE = Path(__file__).resolve().parents[1] / "vtsbench" / "recipes_builtin" / "timesformer.py"
 TINY = {"config": "small", "modality": "rgbd", "image_size": 32, "num_frames": 2, "steps": 3,
         "batch_size": 2, "warmup_steps": 0, "checkpoint_every": 2}
 

@@ -755,13 +755,21 @@ def locked_stage(out: Path) -> Iterator[Path]:
     out.parent.mkdir(parents=True, exist_ok=True)
     # The lock lives beside OUT, not in the partial folder: it is held from before the existence
     # check (build re-runs check_out under it) through the final rename, and a second build
-    # cannot take it while the first removes its build state and renames the folder.
-    fh = open(lock_path(out), "a+b")  # noqa: SIM115 (held for the whole block)
+    # cannot take it while the first removes its build state and renames the folder. The holder
+    # removes the file before letting go; a build that locked a file already removed (opened
+    # just before) sees that it is no longer the one at the path and stops.
+    path = lock_path(out)
+    fh = open(path, "a+b")  # noqa: SIM115 (held for the whole block)
+    held = False
     try:
         try:
             import fcntl
 
             fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            held = True
+            if not path.exists() or os.stat(path).st_ino != os.fstat(fh.fileno()).st_ino:
+                held = False
+                raise OSError("lock file replaced")
         except ImportError:  # no fcntl (Windows): no lock
             pass
         except OSError:
@@ -770,6 +778,8 @@ def locked_stage(out: Path) -> Iterator[Path]:
         (stage / WORK).mkdir(parents=True, exist_ok=True)
         yield stage
     finally:
+        if held:
+            path.unlink(missing_ok=True)
         fh.close()
 
 
