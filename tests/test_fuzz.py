@@ -7,6 +7,7 @@ fast; the count is printed (pytest -s)."""
 
 from __future__ import annotations
 
+import json
 import os
 import random
 import re
@@ -34,7 +35,8 @@ NUMBER = re.compile(rb"(?<![\w.\"-])-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?(?![\w.\"])"
 
 def mutate_json(data: bytes, rng: random.Random, values: list[str] = HOSTILE) -> bytes:
     """A hostile value in place of a number, or a truncation, or invalid UTF-8."""
-    nums = list(NUMBER.finditer(data))
+    nums = [m for m in NUMBER.finditer(data)  # numbers, not digits inside a string value
+            if len(re.findall(rb'(?<!\\)"', data[:m.start()])) % 2 == 0]
     pick = rng.random()
     if nums and pick < 0.7:
         m = rng.choice(nums)
@@ -117,7 +119,18 @@ def test_fuzz_user_files(work: dict[str, Path], capsys: pytest.CaptureFixture[st
         n = int.from_bytes(data[:8], "little")
         if rng.random() < 0.3:  # truncated, or a header length past the end
             return data[:rng.randrange(0, len(data) - 1)]
-        head = mutate_json(data[8:8 + n], rng)
+        head = data[8:8 + n]
+        if rng.random() < 0.5:  # the header itself
+            head = mutate_json(head, rng)
+        else:  # the vtsbench metadata, a JSON document held as a string in the header
+            doc = json.loads(head)
+            meta = doc["__metadata__"]["vtsbench"].encode()
+            try:
+                text = mutate_json(meta, rng).decode()
+            except UnicodeDecodeError:  # bad UTF-8 cannot travel in a JSON string: truncate
+                text = meta[:len(meta) // 2].decode(errors="ignore")
+            doc["__metadata__"]["vtsbench"] = text
+            head = json.dumps(doc).encode()
         return len(head).to_bytes(8, "little") + head + data[8 + n:]
 
     def mutate_own(data: bytes, rng: random.Random) -> bytes:
