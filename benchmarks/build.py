@@ -21,8 +21,9 @@ has calibration.safetensors. Then:
 3. re-encodes the built arrays with zstd levels 1, 3 and 9 and without compression: bytes on
    disk against raw (uint8 RGB + float32 depth), write speed (encode + write whole shards) and
    read speed (every sample through zarr), in frames/s, best of 2;
-4. decodes 48 of the recordings' PNG frames with vtsbench's reader and with OpenCV's
-   `cv2.imread`, as written (Up rows), with Sub rows and with libpng's filter choice per row.
+4. decodes 48 of the recordings' PNG frames with OpenCV (what vtsbench uses), pyspng and
+   imagecodecs (each when installed), as written (Up rows), with Sub rows and with libpng's
+   filter choice per row.
 
 --cli-only runs only the fresh-process builds and 4 (at the demo's size, say:
 `--recordings demo-data/recordings --cli-only`).
@@ -267,17 +268,34 @@ def encode_parts(ds: Path) -> dict[str, float]:
     return out
 
 
-def png_decoding(rec: Path, work: Path, n_frames: int = 48) -> list[dict[str, Any]]:
-    """CPU ms per frame of decoding the recordings' PNG frames with vtsbench's reader
-    (`read_image`: its own fast path, OpenCV for other PNGs) against OpenCV's `cv2.imread`
-    straight to RGB, the same files in the same run (best of 3, one OpenCV thread, malloc
-    keeping freed memory as in the build's workers), for the
-    frames as written (Up rows) and re-encoded with Sub rows and with libpng's filter choice
-    per row (which OpenCV writes by default, and which our reader hands to OpenCV)."""
+def _decoders() -> dict[str, Any]:
+    """PNG bytes -> RGB uint8 with each library that is installed: OpenCV (what vtsbench uses),
+    libspng through pyspng, and imagecodecs (libpng or libspng inside)."""
     import cv2
 
-    from vtsbench.recordings.media import read_image
-    from vtsbench.recordings.png import decode_rgb
+    out: dict[str, Any] = {"OpenCV imdecode": lambda b: cv2.imdecode(
+        np.frombuffer(b, np.uint8), cv2.IMREAD_COLOR_RGB)}
+    try:
+        import pyspng
+
+        out["pyspng"] = lambda b: pyspng.load(b)
+    except ImportError:
+        pass
+    try:
+        import imagecodecs
+
+        out["imagecodecs png_decode"] = lambda b: imagecodecs.png_decode(b)
+    except ImportError:
+        pass
+    return out
+
+
+def png_decoding(rec: Path, work: Path, n_frames: int = 48) -> list[dict[str, Any]]:
+    """CPU ms per frame of decoding the recordings' PNG frames (bytes already read) with each
+    installed library, the same files in the same run (best of 3, one OpenCV thread), for the
+    frames as written (Up rows), re-encoded with Sub rows and with libpng's filter choice per
+    row; and whether every library gives the same pixels."""
+    import cv2
 
     cv2.setNumThreads(1)
     files = sorted((rec / "sequences").rglob("*.png"))[:n_frames]
@@ -298,26 +316,25 @@ def png_decoding(rec: Path, work: Path, n_frames: int = 48) -> list[dict[str, An
             paths.append(p)
         variants[name] = paths
 
-    def best(fn: Any, paths: list[Path]) -> float:
+    def best(fn: Any, blobs: list[bytes]) -> float:
         b = float("inf")
         for _ in range(3):
             t0 = time.process_time()
-            for p in paths:
-                fn(p)
+            for d in blobs:
+                fn(d)
             b = min(b, time.process_time() - t0)
-        return b / len(paths) * 1000
+        return b / len(blobs) * 1000
 
+    decoders = _decoders()
     rows = []
     for name, paths in variants.items():
-        with build_mod._malloc_keeps_memory():  # as in the build's workers
-            ours = best(read_image, paths)
-            theirs = best(lambda p: cv2.imread(str(p), cv2.IMREAD_COLOR_RGB), paths)
-        fast = sum(decode_rgb(p.read_bytes()) is not None for p in paths)
-        same = all(np.array_equal(read_image(p), cv2.imread(str(p), cv2.IMREAD_COLOR_RGB))
-                   for p in paths)
-        rows.append({"filter": name, "kB": np.mean([p.stat().st_size for p in paths]) / 1000,
-                     "ours": ours, "opencv": theirs, "fast": fast, "n": len(paths),
-                     "same": same})
+        blobs = [p.read_bytes() for p in paths]
+        ms = {lib: best(fn, blobs) for lib, fn in decoders.items()}
+        ref = [decoders["OpenCV imdecode"](d) for d in blobs]
+        same = all(np.array_equal(np.asarray(fn(d))[..., :3], r)
+                   for fn in decoders.values() for d, r in zip(blobs, ref, strict=True))
+        rows.append({"filter": name, "kB": np.mean([len(d) for d in blobs]) / 1000,
+                     "ms": ms, "n": len(paths), "same": same})
     shutil.rmtree(tmp, ignore_errors=True)
     return rows
 
@@ -469,15 +486,18 @@ def report_cli(cli: dict[int, dict[str, float]]) -> None:
 
 
 def report_png(rows: list[dict[str, Any]]) -> None:
-    """The PNG decoding table."""
+    """The PNG decoding table: CPU ms a frame per library, and the ratio to OpenCV."""
+    libs = list(rows[0]["ms"]) if rows else []
     print("\n### Decoding the recordings' PNG frames, CPU ms a frame (one core)\n")
-    print("| rows filtered | kB a frame | vtsbench `read_image` | OpenCV `cv2.imread` "
-          "| OpenCV / vtsbench | decoded by the fast path | same pixels |")
-    print("|---|---:|---:|---:|---:|---:|---|")
+    print("| rows filtered | kB a frame | " + " | ".join(libs) + " | OpenCV / fastest other "
+          "| same pixels |")
+    print("|---|---:|" + "---:|" * len(libs) + "---:|---|")
     for r in rows:
-        print(f"| {r['filter']} | {r['kB']:.0f} | {r['ours']:.2f} | {r['opencv']:.2f} "
-              f"| {r['opencv'] / r['ours']:.2f}x | {r['fast']} of {r['n']} "
-              f"| {'yes' if r['same'] else 'NO'} |")
+        others = [v for k, v in r["ms"].items() if k != "OpenCV imdecode"]
+        ratio = f"{r['ms']['OpenCV imdecode'] / min(others):.2f}x" if others else "-"
+        print(f"| {r['filter']} | {r['kB']:.0f} | "
+              + " | ".join(f"{v:.2f}" for v in r["ms"].values())
+              + f" | {ratio} | {'yes' if r['same'] else 'NO'} |")
 
 
 if __name__ == "__main__":

@@ -242,9 +242,9 @@ def test_load_info_missing(tmp_path) -> None:
 
 
 def test_minor_format_version_is_read(tmp_path) -> None:
-    d = make_info().to_dict()
-    d["format_version"] = "1.3"
-    (tmp_path / "info.json").write_text(json.dumps(d))
+    info = make_info()
+    info.format_version = "1.3"
+    (tmp_path / "info.json").write_text(info.to_json())
     assert ds.load_info(tmp_path / "info.json").format_version == "1.3"
 
 

@@ -86,6 +86,6 @@ def test_mount_maps_stage_motion_to_image() -> None:
 def test_save_refuses_invalid_manifest(tmp_path) -> None:
     m = mf.Manifest(sessions=[mf.Session("s", "x", (4, 4))],
                     entries=[mf.Entry("bad id!", "static", "s", mf.Source("a.png"))])
-    with pytest.raises(ValueError, match="invalid manifest"):
+    with pytest.raises(VtsError, match="invalid manifest"):
         mf.save_manifest(tmp_path, m)
     assert not (tmp_path / mf.MANIFEST_NAME).exists()

@@ -11,7 +11,7 @@ from vtsbench.recipes import load_recipe
 
 pytest_plugins = ["loader_conftest"]
 
-RECIPE = Path(__file__).resolve().parents[1] / "recipes" / "resnet.py"
+RECIPE = Path(__file__).resolve().parents[1] / "vtsbench" / "recipes_builtin" / "resnet.py"
 SPLIT = "static_sessions"
 TINY = {"image_size": 32, "steps": 2, "batch_size": 2, "warmup_steps": 0,
         "checkpoint_every": 1, "gradcam": 2}

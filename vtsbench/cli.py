@@ -37,6 +37,8 @@ def _run(fn, *args, **kwargs):
         return fn(*args, **kwargs)
     except VtsError as e:
         _fail(e)
+    except OSError as e:  # an output path that is a file or a folder, a name over 255 bytes...
+        _fail(VtsError(e.strerror or str(e), e.filename))
     except KeyboardInterrupt:
         typer.echo("interrupted: nothing was written under the output's final name", err=True)
         raise typer.Exit(130) from None
@@ -45,15 +47,25 @@ def _run(fn, *args, **kwargs):
 def _report(problems: list[str], warnings: list[str], summary: str) -> None:
     """Print warnings, problems (one line each) and a summary; exit 1 if there is a problem."""
     from rich.console import Console
+    from rich.markup import escape
 
     console = Console(highlight=False)
     for w in warnings:
-        console.print(f"[yellow]warning[/] {w}", soft_wrap=True)
+        console.print(f"[yellow]warning[/] {escape(w)}", soft_wrap=True)
     for p in problems:
-        console.print(f"[red]problem[/] {p}", soft_wrap=True)
-    console.print(summary)
+        console.print(f"[red]problem[/] {escape(p)}", soft_wrap=True)
+    console.print(escape(summary))
     if problems:
         raise typer.Exit(1)
+
+
+def _finite(value: float | None) -> float | None:
+    """Option callback: NaN and infinity are refused where a number is expected."""
+    import math
+
+    if value is not None and not math.isfinite(value):
+        raise typer.BadParameter(f"expected a finite number, got {value}")
+    return value
 
 
 def _parse_size(text: str) -> tuple[int, int]:
@@ -82,6 +94,7 @@ def simulate(
     frames: Annotated[int, typer.Option(min=2, help="Frames per sequence.")] = 8,
     sessions: Annotated[int, typer.Option(min=1, help="Sessions (backgrounds, noise draws).")] = 3,
     mm_per_px: Annotated[float, typer.Option(
+        callback=_finite,
         min=1e-4, help="Scale of the sensor, mm per pixel.")] = 0.03,
     workers: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 1,
     overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
@@ -137,12 +150,15 @@ def manifest(
     sensor: Annotated[str, typer.Option(help="Sensor id.")] = "unknown",
     session: Annotated[str, typer.Option(
         help="Session id when the pattern has no {session}.")] = "s0",
-    mm_per_px: Annotated[float | None, typer.Option(help="mm per pixel, if known.")] = None,
+    mm_per_px: Annotated[float | None, typer.Option(
+        callback=_finite, help="mm per pixel, if known.")] = None,
     fps: Annotated[float | None, typer.Option(
+        callback=_finite,
         help="Frame rate (default: read from videos).")] = None,
     background: Annotated[str | None, typer.Option(
         help="No-contact frame, relative to FOLDER.")] = None,
     ball_radius_mm: Annotated[float | None, typer.Option(
+        callback=_finite,
         help="Ball radius in mm for presses.")] = None,
     circles: Annotated[Path | None, typer.Option(
         help="CSV of press circles: a file column (file|img_names|image|name) and x|center_x, "
@@ -222,6 +238,7 @@ def build(
         min=0, max=22, help="zstd level of the arrays; 0 stores them uncompressed.")] = 3,
     seed: Annotated[int, typer.Option(min=0, help="Seed of the split files.")] = 0,
     shard_mb: Annotated[float, typer.Option(
+        callback=_finite,
         help="Target uncompressed RGB shard size in MB (whole samples per shard).")] = 32.0,
     quiet: Annotated[bool, typer.Option(help="No progress bars.")] = False,
     holdout_objects: Annotated[Path | None, typer.Option(
@@ -250,25 +267,27 @@ def build(
                         version=version, compression_level=compression_level, seed=seed,
                         shard_mb=shard_mb, progress=not quiet,
                         holdout_objects=holdout_objects, split_files=tuple(split_file or ()))
-    res = _run(run_build, recordings, out, opts, log=lambda m: console.print(m, soft_wrap=True))
+    res = _run(run_build, recordings, out, opts, log=lambda m: console.print(m, soft_wrap=True,
+                                                                       markup=False))
     _print_build(res)
 
 
 def _print_build(res) -> None:
     """The skipped entries and a summary table of a build."""
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
     from .dataset.summary import human
 
     console = Console(highlight=False)
     for w in res.warnings:
-        console.print(f"[yellow]warning[/] {w}", soft_wrap=True)
+        console.print(f"[yellow]warning[/] {escape(w)}", soft_wrap=True)
     for eid, why in res.skipped.items():
-        console.print(f"[yellow]skipped[/] {eid}: {why}", soft_wrap=True)
+        console.print(f"[yellow]skipped[/] {escape(f'{eid}: {why}')}", soft_wrap=True)
     for why in res.splits_skipped.values():
-        console.print(f"[yellow]split not made[/] {why}", soft_wrap=True)
-    t = Table(title=f"built {res.out}", title_justify="left")
+        console.print(f"[yellow]split not made[/] {escape(why)}", soft_wrap=True)
+    t = Table(title=escape(f"built {res.out}"), title_justify="left")
     for c in ("kind", "samples", "frames", "shards"):
         t.add_column(c, justify="left" if c == "kind" else "right")
     for kind in ("static", "slip"):
@@ -307,7 +326,7 @@ def verify(
     from .dataset.verify import verify as run_verify
 
     report = _run(run_verify, dataset, decode=not quick, progress=True)
-    _report(report.problems, [], f"{report.files} files, {report.samples} samples, "
+    _report(report.problems, report.warnings, f"{report.files} files, {report.samples} samples, "
             f"{report.shards} shards checked: {len(report.problems)} problem(s)")
 
 
@@ -388,6 +407,7 @@ def calibrate(
         min=0, help="Presses kept out of training and scored (default: a fifth).")] = None,
     seed: Annotated[int, typer.Option(help="Seed of the hold-out choice, sampling, mlp.")] = 0,
     mm_per_px: Annotated[float | None, typer.Option(
+        callback=_finite,
         help="Scale in mm per pixel (default: from the recordings).")] = None,
     background: Annotated[Path | None, typer.Option(
         help="No-contact image (default: the sessions' backgrounds).")] = None,
@@ -551,13 +571,14 @@ def eval_(
 
 def _print_rows(title: str, head: tuple[str, ...], rows: list[tuple[str, ...]]) -> None:
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
-    t = Table(title=title, title_justify="left")
+    t = Table(title=escape(title), title_justify="left")
     for i, c in enumerate(head):
         t.add_column(c, justify="left" if i in (0, len(head) - 1) else "right")
     for r in rows:
-        t.add_row(*r)
+        t.add_row(*(escape(x) for x in r))
     Console(highlight=False).print(t)
 
 
@@ -627,7 +648,7 @@ def train(
 ) -> None:
     """Train a recipe on a split's train part; prints the checkpoint path.
 
-    Example: [bold]vtsbench train recipes/flow.py --dataset data/ds --split unseen_objects --out
+    Example: [bold]vtsbench train flow --dataset data/ds --split unseen_objects --out
     runs/flow[/]
     """
     import json
@@ -658,16 +679,17 @@ def predict(
 ) -> None:
     """Predict a split part with a trained recipe; writes a submission vtsbench eval accepts.
 
-    Example: [bold]vtsbench predict recipes/flow.py runs/flow/checkpoint.safetensors --dataset
+    Example: [bold]vtsbench predict flow runs/flow/checkpoint.safetensors --dataset
     data/ds --split unseen_objects --out flow.csv[/]
     """
     import time
 
-    from .recipes import load_recipe, write_submission
+    from .recipes import check_checkpoint, load_recipe, write_submission
 
     rec = _run(load_recipe, recipe)
     if not checkpoint.exists():
         _fail(FileNotFoundError(f"checkpoint not found: {checkpoint}"))
+    _run(check_checkpoint, checkpoint)
     t0 = time.perf_counter()
     rows = _run(rec.predict, checkpoint, dataset, split, part, device=device)
     wall = time.perf_counter() - t0
@@ -692,10 +714,13 @@ def collect(
     session: Annotated[str, typer.Option(help="Session id (one sitting of one sensor).")] = "s0",
     sensor: Annotated[str | None, typer.Option(
         help="Sensor id (new session; default 'unknown').")] = None,
-    mm_per_px: Annotated[float | None, typer.Option(help="Scale, mm per pixel.")] = None,
+    mm_per_px: Annotated[float | None, typer.Option(
+        callback=_finite, help="Scale, mm per pixel.")] = None,
     fps: Annotated[float | None, typer.Option(
+        callback=_finite,
         help="Frame rate (default: as the source reports it).")] = None,
     mount_rotation: Annotated[float | None, typer.Option(
+        callback=_finite,
         help="Mount: rotate stage motion CCW by this many degrees into the image (default 0).")
     ] = None,
     mount_mirror: Annotated[bool | None, typer.Option(
@@ -713,10 +738,13 @@ def collect(
     every: Annotated[int, typer.Option(
         min=1, help="static: keep every K-th frame; press: at most one frame per K.")] = 10,
     ball_radius: Annotated[float | None, typer.Option(
+        callback=_finite,
         help="Indenter ball radius in mm (required for --kind press).")] = None,
     contact_level: Annotated[float, typer.Option(
+        callback=_finite,
         help="press: gray levels of (blurred) change that count as contact.")] = 10.0,
     contact_area: Annotated[float, typer.Option(
+        callback=_finite,
         help="press: fraction of pixels in contact that makes a press frame.")] = 0.001,
     object_name: Annotated[str | None, typer.Option("--object", help="Object label.")] = None,
     take: Annotated[str | None, typer.Option(
@@ -726,10 +754,13 @@ def collect(
     motion_log: Annotated[Path | None, typer.Option(
         help="CSV with columns t_s,x_mm,y_mm,z_mm (stage motion; z into the gel).")] = None,
     log_offset: Annotated[float, typer.Option(
+        callback=_finite,
         help="Log time of frame 0 in seconds: frame i is at i / fps + offset.")] = 0.0,
     slip_threshold_mm: Annotated[float | None, typer.Option(
+        callback=_finite,
         help="Lateral motion (mm) over a window that makes a slip (default 0.05).")] = None,
     press_threshold_mm: Annotated[float | None, typer.Option(
+        callback=_finite,
         help="Indentation increase (mm) over a window that makes a press (default 0.05).")
     ] = None,
     append: Annotated[bool, typer.Option(help="Add a session or take to an existing OUT.")] = False,

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import staged_dir
+from .atomic import check_replaceable, staged_dir
 from .errors import VtsError
 from .labels import PRESS_THRESHOLD_MM, SLIP_THRESHOLD_MM, Thresholds, label_motion
 from .motionlog import MotionLog, read_motion_log
@@ -429,6 +429,8 @@ def collect(out: str | Path, opts: CollectOptions, progress: bool = True) -> Col
         elif not opts.overwrite:
             raise VtsError("already exists (use --append to add to it, or --overwrite to "
                            "replace it)", out)
+        else:  # before recording anything: a folder vtsbench did not write is never replaced
+            check_replaceable(out, True, MANIFEST_NAME)
     where = out / MANIFEST_NAME
     session: Session | None = None
     if manifest is not None:
@@ -495,7 +497,7 @@ def collect(out: str | Path, opts: CollectOptions, progress: bool = True) -> Col
             return replace(manifest, sessions=sessions, entries=manifest.entries + entries), new
 
         if manifest is None:
-            with staged_dir(out, overwrite=opts.overwrite) as stage:
+            with staged_dir(out, overwrite=opts.overwrite, marker=MANIFEST_NAME) as stage:
                 rec = _record(cap, stage / opts.session / take, plan, progress)
                 m, _ = build(rec)
                 bg = rec.background if bg_file is None else bg_file

@@ -54,14 +54,17 @@ class MotionLog:
 def read_motion_log(path: str | Path) -> MotionLog:
     """Read and check a motion log CSV; every problem is a one-line VtsError naming the file."""
     path = Path(path)
-    if not path.is_file():
-        raise VtsError("motion log not found", path)
+    from .jsonio import read_bytes
+
+    data = read_bytes(path, "motion log", 1 << 30)
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        text = data.decode("utf-8-sig")
+        rows = [(n, r) for n, r in enumerate(csv.reader(text.splitlines()), start=1)
+                if r and any(c.strip() for c in r)]
     except UnicodeDecodeError as e:
         raise VtsError(f"motion log is not UTF-8 text ({e.reason})", path) from None
-    rows = [(n, r) for n, r in enumerate(csv.reader(text.splitlines()), start=1)
-            if r and any(c.strip() for c in r)]
+    except csv.Error as e:
+        raise VtsError(f"unreadable motion log ({e})", path) from None
     if not rows:
         raise VtsError(f"motion log is empty (expected a header {','.join(COLUMNS)})", path)
     header_line, header = rows[0]
@@ -71,6 +74,9 @@ def read_motion_log(path: str | Path) -> MotionLog:
         raise VtsError(f"motion log lacks column(s) {', '.join(missing)} (needs "
                        f"{','.join(COLUMNS)}; header on line {header_line}: {','.join(names)})",
                        path)
+    dup = sorted({c for c in names if names.count(c) > 1})
+    if dup:
+        raise VtsError(f"motion log header repeats column {dup[0]!r}", path)
     idx = [names.index(c) for c in COLUMNS]
     values: list[list[float]] = []
     for n, row in rows[1:]:

@@ -57,6 +57,8 @@ def _caption(e: Entry) -> str:
 
 def write_preview(folder: str | Path, out: str | Path, n: int = 12, seed: int = 0) -> int:
     """Render up to n entries of a recordings folder to a PNG contact sheet; returns how many."""
+    if Path(out).is_dir():
+        raise VtsError("is a folder; --out takes the name of the PNG to write", out)
     import matplotlib
 
     matplotlib.use("Agg")

@@ -15,6 +15,7 @@ import csv
 import importlib
 import importlib.util
 import json
+import math
 import sys
 from collections.abc import Iterable
 from pathlib import Path
@@ -79,6 +80,9 @@ def _from_file(path: Path) -> Any:
     sys.modules[mod_name] = module
     try:
         spec.loader.exec_module(module)
+    except ModuleNotFoundError as e:
+        sys.modules.pop(mod_name, None)
+        raise VtsError(_needs(e), path) from None
     except Exception:
         sys.modules.pop(mod_name, None)
         raise
@@ -95,9 +99,16 @@ def registered() -> dict[str, Any]:
 
 
 def _builtin_file(name: str) -> Path | None:
-    """recipes/NAME.py of a source checkout (when the installed metadata predates it)."""
-    path = Path(__file__).resolve().parents[1] / "recipes" / f"{name}.py"
+    """vtsbench/recipes_builtin/NAME.py (when the installed metadata predates it)."""
+    path = Path(__file__).resolve().parent / "recipes_builtin" / f"{name}.py"
     return path if path.is_file() else None
+
+
+def _needs(e: ModuleNotFoundError) -> str:
+    """The one-line reason of a recipe that imports a package that is not installed."""
+    extra = " (pip install 'vtsbench[torch]')" if (e.name or "").split(".")[0] in (
+        "torch", "torchvision", "transformers") else ""
+    return f"the recipe needs the Python package {e.name!r}, which is not installed{extra}"
 
 
 def load_recipe(name_or_path: str | Path) -> Any:
@@ -107,13 +118,19 @@ def load_recipe(name_or_path: str | Path) -> Any:
         return _from_file(Path(text))
     eps = registered()
     if text in eps:
-        return _check(eps[text].load(), f"entry point {text}")
+        try:
+            return _check(eps[text].load(), f"entry point {text}")
+        except ModuleNotFoundError as e:
+            if not eps[text].module.startswith(e.name or "\0"):  # else stale metadata: below
+                raise VtsError(_needs(e), f"recipe {text}") from None
     try:
-        module = importlib.import_module(f"recipes.{text}")
-    except ModuleNotFoundError:
+        module = importlib.import_module(f"vtsbench.recipes_builtin.{text}")
+    except ModuleNotFoundError as e:
+        if e.name and not e.name.startswith("vtsbench.recipes_builtin"):
+            raise VtsError(_needs(e), f"recipe {text}") from None
         module = None
     if module is not None and hasattr(module, "RECIPE"):
-        return _check(module.RECIPE, f"recipes.{text}")
+        return _check(module.RECIPE, f"vtsbench.recipes_builtin.{text}")
     path = _builtin_file(text)
     if path is not None:
         return _from_file(path)
@@ -121,28 +138,70 @@ def load_recipe(name_or_path: str | Path) -> Any:
     raise VtsError(f"unknown recipe {text!r} (registered: {known}; or give a path to a .py file)")
 
 
+def check_checkpoint(path: str | Path) -> Path:
+    """A checkpoint a recipe can open: a regular file; a .safetensors one whose header and JSON
+    metadata values parse (each through the same limits as every user JSON), a .json one that
+    parses; else a one-line VtsError. Other formats are the recipe's to read."""
+    from .jsonio import loads, read_bytes, read_json, regular_file
+
+    path = Path(path)
+    if path.suffix == ".json":
+        read_json(path, "checkpoint")
+    if path.suffix != ".safetensors":
+        return regular_file(path, "checkpoint")
+    data = read_bytes(path, "checkpoint", 1 << 40)
+    n = int.from_bytes(data[:8], "little") if len(data) >= 8 else 0
+    if not 0 < n <= len(data) - 8:
+        raise VtsError("not a safetensors checkpoint (no header)", path)
+    head = loads(data[8:8 + n], path, "checkpoint header")
+    if not isinstance(head, dict):
+        raise VtsError("not a safetensors checkpoint (header is not a mapping)", path)
+    meta = head.get("__metadata__") or {}
+    if not isinstance(meta, dict):
+        raise VtsError("not a safetensors checkpoint (metadata is not a mapping)", path)
+    for key, value in meta.items():
+        if isinstance(value, str) and value[:1] in "{[":
+            loads(value, path, f"checkpoint metadata {key!r}")
+    try:
+        from safetensors.numpy import load
+
+        load(data)
+    except Exception as e:  # safetensors' own error type for damaged data
+        raise VtsError(f"corrupt checkpoint ({str(e).splitlines()[0][:100]})", path) from None
+    return path
+
+
 def load_config(recipe: Any, path: str | Path | None) -> dict[str, Any]:
     """The recipe's default config updated by a JSON (or TOML) file; unknown keys are an error."""
     config = dict(recipe.default_config())
     if path is None:
         return config
-    path = Path(path)
-    try:
-        if path.suffix == ".toml":
-            import tomllib
+    from .jsonio import loads, read_bytes
 
-            given = tomllib.loads(path.read_text())
-        else:
-            given = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise VtsError("config file not found", path) from None
-    except ValueError as e:
-        raise VtsError(f"config is not valid ({e})", path) from None
+    path = Path(path)
+    data = read_bytes(path, "config file", 16 << 20)
+    if path.suffix == ".toml":
+        import tomllib
+
+        try:
+            given = tomllib.loads(data.decode("utf-8"))
+        except (ValueError, RecursionError) as e:
+            raise VtsError(f"config is not valid TOML ({str(e)[:100]})", path) from None
+    else:
+        given = loads(data, path, "config JSON")
     if not isinstance(given, dict):
         raise VtsError("config must be a mapping of option names to values", path)
     unknown = sorted(set(given) - set(config))
     if unknown:
         raise VtsError(f"unknown config keys {unknown} (known: {sorted(config)})", path)
+    for key, value in given.items():
+        want = config[key]
+        ok = (isinstance(value, type(want)) or want is None
+              or (isinstance(want, float) and isinstance(value, int)))
+        if not ok or (isinstance(value, bool) and not isinstance(want, bool)) or (
+                isinstance(value, float) and not math.isfinite(value)):
+            raise VtsError(f"config key {key!r}: expected a {type(want).__name__} like "
+                           f"{want!r}, got {value!r}", path)
     config.update(given)
     return config
 

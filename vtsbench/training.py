@@ -196,7 +196,22 @@ def save_checkpoint(path: str | Path, model: torch.nn.Module,
 def load_checkpoint(path: str | Path, model: torch.nn.Module | None = None,
                     optimizer: torch.optim.Optimizer | None = None, scaler: Any = None,
                     restore_rng: bool = False) -> dict[str, str]:
-    """Load what save_checkpoint wrote into model / optimizer / scaler; returns the metadata."""
+    """Load what save_checkpoint wrote into model / optimizer / scaler; returns the metadata.
+    A checkpoint that is damaged or does not fit the model is a one-line VtsError."""
+    from .errors import VtsError
+    from .recipes import check_checkpoint
+
+    check_checkpoint(path)
+    try:
+        return _load_checkpoint(path, model, optimizer, scaler, restore_rng)
+    except (KeyError, ValueError, TypeError, IndexError, RuntimeError) as e:
+        text = str(e).strip().splitlines()[0][:120] if str(e).strip() else type(e).__name__
+        raise VtsError(f"checkpoint does not fit ({text})", path) from None
+
+
+def _load_checkpoint(path: str | Path, model: torch.nn.Module | None,
+                     optimizer: torch.optim.Optimizer | None, scaler: Any,
+                     restore_rng: bool) -> dict[str, str]:
     from safetensors import safe_open
 
     with safe_open(str(path), framework="pt") as fh:

@@ -551,6 +551,7 @@ _PARENT: int | None = None
 def _pool_worker_init(parent: int) -> None:
     global _PARENT
     _PARENT = parent
+    _watch_parent(parent)
     _limit_threads()
     # Import what a shard task needs now (about 0.5 s of CPU), while the build process is still
     # checking the recordings and planning: the pool is started before that. (Shards are
@@ -562,6 +563,19 @@ def _pool_worker_init(parent: int) -> None:
     from ..depth import calibration, mapping, poisson  # noqa: F401
     from ..recordings import media  # noqa: F401
     from . import depthmaps, store  # noqa: F401
+
+
+def _watch_parent(parent: int, every_s: float = 0.5) -> None:
+    """A daemon thread that ends this worker when the build process is gone (kill -9 of the
+    build: nobody shuts the pool down, and an idle worker would wait on its queue forever)."""
+    import threading
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(every_s)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="vtsbench-parent-watch", daemon=True).start()
 
 
 def _check_parent() -> None:
@@ -760,23 +774,43 @@ def partial_path(out: Path) -> Path:
     return out.with_name(f".{out.name}.partial")
 
 
+def lock_path(out: Path) -> Path:
+    """`.OUT.lock` beside OUT: the lock of every build writing OUT (an empty file, kept)."""
+    return out.with_name(f".{out.name}.lock")
+
+
 @contextmanager
 def locked_stage(out: Path) -> Iterator[Path]:
     """Create or reuse the partial folder, holding a lock so two builds never share it."""
     stage = partial_path(out)
-    (stage / WORK).mkdir(parents=True, exist_ok=True)
-    fh = open(stage / WORK / "lock", "a+b")  # noqa: SIM115 (held for the whole block)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    # The lock lives beside OUT, not in the partial folder: it is held from before the existence
+    # check (build re-runs check_out under it) through the final rename, and a second build
+    # cannot take it while the first removes its build state and renames the folder. The holder
+    # removes the file before letting go; a build that locked a file already removed (opened
+    # just before) sees that it is no longer the one at the path and stops.
+    path = lock_path(out)
+    fh = open(path, "a+b")  # noqa: SIM115 (held for the whole block)
+    held = False
     try:
         try:
             import fcntl
 
             fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            held = True
+            if not path.exists() or os.stat(path).st_ino != os.fstat(fh.fileno()).st_ino:
+                held = False
+                raise OSError("lock file replaced")
         except ImportError:  # no fcntl (Windows): no lock
             pass
         except OSError:
-            raise VtsError("another build is writing into this partial build", stage) from None
+            raise VtsError("another build is writing this dataset (its lock is held)",
+                           out) from None
+        (stage / WORK).mkdir(parents=True, exist_ok=True)
         yield stage
     finally:
+        if held:
+            path.unlink(missing_ok=True)
         fh.close()
 
 
@@ -943,6 +977,8 @@ def build(recordings: str | Path, out: str | Path, opts: BuildOptions | None = N
         client = (stack.enter_context(dask_client(opts.scheduler, opts.workers))
                   if opts.scheduler else None)
         stage = stack.enter_context(locked_stage(out))
+        check_out(root, out, opts.overwrite)  # again under the lock: another build may have
+        # finished OUT between the first check and taking the lock
         kept, built, first = 0, 0, True
         previews: dict[str, Any] = {}
         while True:
@@ -1186,8 +1222,9 @@ def finish(stage: Path, out: Path, plan: Plan, splits: Any, split_sha: dict[str,
             sizes[top] = sizes.get(top, 0) + p.stat().st_size
     shutil.rmtree(stage / WORK)
     if out.exists():  # --overwrite of a dataset (check_out): swap, then delete the old one
-        old = out.with_name(f".{out.name}.old")
-        shutil.rmtree(old, ignore_errors=True)
+        import secrets
+
+        old = out.with_name(f".{out.name}.old-{secrets.token_hex(6)}")  # a name of its own only
         os.replace(out, old)
         os.replace(stage, out)
         shutil.rmtree(old, ignore_errors=True)

@@ -57,6 +57,22 @@ def write_index(path: Path, kind: str, metas: Sequence[SampleMeta],
     write_file(path, index_bytes(kind, metas, extra))
 
 
+def read_parquet(path: Path, columns: list[str] | None = None) -> Any:
+    """A parquet file of the dataset as a pyarrow Table; a missing, truncated or damaged file,
+    or one without the columns asked for, is a one-line VtsError naming it."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from ..jsonio import regular_file
+
+    regular_file(path, "index")
+    try:
+        return pq.read_table(path, columns=columns)
+    except (pa.ArrowException, OSError, KeyError, ValueError) as e:
+        text = str(e).strip().splitlines()[0][:150] if str(e).strip() else type(e).__name__
+        raise VtsError(f"not a readable parquet file ({text})", path) from None
+
+
 def read_index(path: Path, kind: str) -> list[SampleMeta]:
     """Read one kind's index back into SampleMeta rows; one-line VtsError when unreadable."""
     import pyarrow as pa

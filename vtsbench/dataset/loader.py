@@ -99,6 +99,16 @@ class StrictStore(WrapperStore):
         return type(self)(store, self.location)
 
     async def get(self, key: str, prototype: Any, byte_range: Any = None) -> Any:
+        if "://" not in self.location:  # a local file must be a regular one of bounded size
+            import stat
+
+            try:
+                st = os.stat(Path(self.location) / key)
+            except OSError:
+                st = None
+            if st is not None and (not stat.S_ISREG(st.st_mode) or st.st_size > 4 << 30):
+                raise VtsError("not a regular file of at most 4 GiB (a link to a device?)",
+                               f"{self.location}/{key}")
         buf = await self._store.get(key, prototype, byte_range)
         if buf is None and "/c/" in key:
             raise VtsError("missing (an incomplete copy of the dataset?)",
@@ -151,8 +161,51 @@ class KindStore:
                 group = store.open_group(self.loc.url, self.kind, self.loc.storage_options)
                 strict = StrictStore(group.store, store.group_location(self.loc.url, self.kind))
                 self._group = zarr.open_group(strict, mode="r", use_consolidated=True)
-            self._arrays[name] = self._group[name]
+            try:
+                arr = self._group[name]
+            except Exception as e:  # a changed zarr.json
+                raise VtsError(f"cannot open the array ({type(e).__name__}); run `vtsbench "
+                               "verify`", f"{store.group_location(self.loc.url, self.kind)}/"
+                               f"{name}") from None
+            self._agrees(name, arr)
+            self._arrays[name] = arr
         return self._arrays[name]
+
+    def _agrees(self, name: str, arr: Any) -> None:
+        """Refuse an array whose shape, dtype or depth scale contradicts info.json (metadata
+        changed after the build would otherwise read as wrong numbers)."""
+        where = f"{store.group_location(self.loc.url, self.kind)}/{name}"
+        want = tuple(self.info.shapes.get(self.kind, {}).get(name, ()))
+        if tuple(arr.shape) != want:
+            raise VtsError(f"shape {tuple(arr.shape)} contradicts info.json ({want}); run "
+                           "`vtsbench verify`", where)
+        if str(arr.dtype) != store.DTYPES[name]:
+            raise VtsError(f"dtype {arr.dtype} contradicts the format ({store.DTYPES[name]})",
+                           where)
+        scale = arr.attrs.get("scale") if name == "depth" else None
+        if scale is not None and scale != self.info.depth_scale_mm:
+            raise VtsError(f"depth scale {scale} mm contradicts info.json depth_scale_mm "
+                           f"{self.info.depth_scale_mm}; run `vtsbench verify`", where)
+
+    def _decode_error(self, name: str, runs: list[tuple[int, int]], err: Exception) -> VtsError:
+        """The error of a chunk that does not decode, naming the shard file and the sample."""
+        arr = self.array(name)
+        sps = int(arr.shards[0]) if arr.shards else 1
+        for a, b in runs:
+            for r in range(a, b):
+                try:
+                    arr[r]
+                except Exception:
+                    ids = self.columns["sample_id"]
+                    pos = np.flatnonzero(self.rows == r)
+                    sid = ids[int(pos[0])] if len(pos) else "?"
+                    return VtsError(f"sample {sid} (row {r}) does not decode "
+                                    f"({type(err).__name__}: damaged shard; run "
+                                    "`vtsbench verify`)",
+                                    f"{store.group_location(self.loc.url, self.kind)}/{name}/c/"
+                                    f"{r // sps}/" + "/".join("0" * (arr.ndim - 1)))
+        return VtsError(f"does not decode ({type(err).__name__})",
+                        f"{store.group_location(self.loc.url, self.kind)}/{name}")
 
     def sample_nbytes(self, names: Sequence[str]) -> int:
         """Decoded bytes of one sample's arrays (depth as float32)."""
@@ -194,7 +247,12 @@ class KindStore:
         ordered = len(uniq) == len(rows) and bool(np.all(np.diff(rows) > 0))
         out = {}
         for n in names:
-            data = _read_runs(self.array(n), runs, len(uniq), frames)
+            try:
+                data = _read_runs(self.array(n), runs, len(uniq), frames)
+            except VtsError:
+                raise
+            except Exception as e:  # zarr's checksum or codec error, with no file or sample
+                raise self._decode_error(n, runs, e) from None
             if not ordered:
                 data = data[inverse.reshape(-1)]
             if n == "depth":
@@ -408,7 +466,10 @@ class View:
         """A torch Dataset of (tensor, target dict); `transforms` sees the whole sample as one
         dict, `transform` the tensor, `target_transform` the target; see
         vtsbench.dataset.torch_dataset."""
-        from .torch_dataset import TorchView
+        try:
+            from .torch_dataset import TorchView
+        except ModuleNotFoundError as e:
+            raise VtsError(f"to_torch needs {e.name!r}: pip install 'vtsbench[torch]'") from None
 
         return TorchView(self, modality=modality, size=size, frames=frames, transform=transform,
                          targets=targets, transforms=transforms,

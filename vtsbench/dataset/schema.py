@@ -22,6 +22,8 @@ if TYPE_CHECKING:
     import pyarrow
 
 FORMAT = "vtsbench.dataset"
+#: 1.1: info.json carries info_sha256, the sha256 of its own text (see `DatasetInfo.to_json`),
+#: and the depth array CF attributes (scale_factor, units) that xarray and other readers decode.
 FORMAT_VERSION = "1.1"
 DEPTH_SCALE_MM = 0.001
 DEPTH_DTYPE = "int16"
@@ -65,7 +67,9 @@ def schema_errors(doc: Any, name: str, at: str = "") -> list[str]:
 def _violations(sch: dict[str, Any], doc: Any) -> list[str]:
     import jsonschema
 
-    validator = jsonschema.Draft202012Validator(sch)
+    from ..jsonio import strict_validator
+
+    validator = strict_validator(sch)
     out = []
     for err in sorted(validator.iter_errors(doc), key=lambda e: list(map(str, e.absolute_path))):
         where = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in err.absolute_path)
@@ -402,6 +406,8 @@ class DatasetInfo:
     depth_scale_mm: float = DEPTH_SCALE_MM
     depth_dtype: str = DEPTH_DTYPE
     format_version: str = FORMAT_VERSION
+    #: as read from the file (to_json computes it afresh)
+    info_sha256: str = field(default="", compare=False)
 
     def class_idx(self, obj: str) -> int:
         """The class index of an object name (its index in the sorted `objects`)."""
@@ -436,7 +442,15 @@ class DatasetInfo:
         }
 
     def to_json(self) -> str:
-        return json.dumps(self.to_dict(), indent=1) + "\n"
+        """The text of meta/info.json. From format 1.1 its last key, info_sha256, is the sha256
+        of the text with that value empty: a change of any byte of the file is detected, while
+        the files list cannot hold the checksum of the file that holds it."""
+        doc = self.to_dict()
+        if _minor(self.format_version) < 1:
+            return json.dumps(doc, indent=1, allow_nan=False) + "\n"
+        doc[INFO_HASH] = ""
+        text = json.dumps(doc, indent=1, allow_nan=False) + "\n"
+        return _with_info_hash(text, hashlib.sha256(text.encode()).hexdigest())
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> DatasetInfo:
@@ -455,7 +469,61 @@ class DatasetInfo:
             splits=dict(d["splits"]), files=dict(d["files"]),
             dataset_sha256=d["dataset_sha256"], build=dict(d["build"]), units=dict(d["units"]),
             depth_scale_mm=float(d["depth_scale_mm"]), depth_dtype=d["depth_dtype"],
-            format_version=d["format_version"])
+            format_version=d["format_version"], info_sha256=d.get("info_sha256", ""))
+
+
+INFO_HASH = "info_sha256"
+
+
+def _minor(version: str) -> int:
+    """The minor number of a format version such as '1.1' (0 when unreadable)."""
+    m = re.fullmatch(r"\d+\.(\d+)", str(version))
+    return int(m.group(1)) if m else 0
+
+
+def _with_info_hash(text: str, value: str) -> str:
+    """info.json text with its (last) info_sha256 value replaced."""
+    key = f'"{INFO_HASH}": "'
+    i = text.rfind(key)
+    j = text.index('"', i + len(key))
+    return text[:i + len(key)] + value + text[j:]
+
+
+def info_hash_problem(text: str, doc: Mapping[str, Any]) -> str | None:
+    """Why info.json's text does not match its info_sha256 (None when it does, or for format
+    1.0, which has none)."""
+    if _minor(str(doc.get("format_version", ""))) < 1:
+        return None
+    got = doc.get(INFO_HASH)
+    if not isinstance(got, str) or f'"{INFO_HASH}": "{got}"' not in text:
+        return f"{INFO_HASH} missing (format 1.1 and later carry it)"
+    want = hashlib.sha256(_with_info_hash(text, "").encode()).hexdigest()
+    if got != want:
+        return (f"{INFO_HASH} mismatch: the file was changed after the build (its text hashes "
+                f"to {want[:16]}..., it records {got[:16]}...)")
+    return None
+
+
+def consistency_problems(info: DatasetInfo) -> list[str]:
+    """Where info.json contradicts itself: shapes against resolution and frames_per_sequence,
+    shapes against counts."""
+    out = []
+    h, w = info.resolution
+    for kind, shapes in info.shapes.items():
+        for name, shape in shapes.items():
+            hw = shape[-3:-1] if name == "rgb" else shape[-2:]
+            if tuple(hw) != (h, w):
+                out.append(f"shapes.{kind}.{name} {list(shape)} contradicts resolution {h}x{w}")
+            if kind == "slip" and len(shape) > 1 and shape[1] != info.frames_per_sequence:
+                out.append(f"shapes.slip.{name} {list(shape)} contradicts frames_per_sequence "
+                           f"{info.frames_per_sequence}")
+        n = shapes.get("rgb", (0,))[0]
+        if any(s[0] != n for s in shapes.values()):
+            out.append(f"shapes.{kind}: arrays of different lengths")
+        total = getattr(info.counts, kind).samples if hasattr(info.counts, kind) else n
+        if total != n:
+            out.append(f"counts.{kind}.total {total} contradicts shapes.{kind} ({n} samples)")
+    return out
 
 
 def dataset_checksum(files: Mapping[str, str]) -> str:
@@ -488,12 +556,11 @@ def load_info(path: str | Path) -> DatasetInfo:
         path = path / INFO_PATH
     if not path.is_file():
         raise VtsError("not found (not a vtsbench dataset?)", path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError as e:
-        raise VtsError(f"not UTF-8 text ({e.reason})", path) from None
-    except json.JSONDecodeError as e:
-        raise VtsError(f"invalid JSON at line {e.lineno} column {e.colno}: {e.msg}", path) from None
+    from ..jsonio import loads, read_bytes
+
+    data = read_bytes(path, "dataset info", 64 << 20)
+    doc = loads(data, path)
+    problem = info_hash_problem(data.decode("utf-8"), doc) if isinstance(doc, dict) else None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
         raise VtsError(f"not a vtsbench dataset info (format is {got!r}, expected {FORMAT!r})",
@@ -510,7 +577,14 @@ def load_info(path: str | Path) -> DatasetInfo:
         raise VtsError(f"{errs[0]}{more}", path)
     if doc["objects"] != sorted(doc["objects"]):
         raise VtsError("objects: not sorted (class_idx is the index in the sorted names)", path)
-    return DatasetInfo.from_dict(doc)
+    if problem:
+        raise VtsError(problem, path)
+    info = DatasetInfo.from_dict(doc)
+    bad = consistency_problems(info)
+    if bad:
+        more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
+        raise VtsError(f"{bad[0]}{more}", path)
+    return info
 
 
 @dataclass

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import hashlib
 import itertools
-import json
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -449,17 +448,16 @@ def read_split(path: str | Path, expected_sha256: str | None = None) -> SplitFil
     path = Path(path)
     if not path.is_file():
         raise VtsError("split file not found", path)
-    data = path.read_bytes()
+    from ..jsonio import read_bytes
+
+    data = read_bytes(path, "split file", 256 << 20)
     got = hashlib.sha256(data).hexdigest()
     if expected_sha256 is not None and got != expected_sha256:
         raise VtsError(f"sha256 mismatch: expected {expected_sha256}, found {got} "
                        "(the split file was changed after the build)", path)
-    try:
-        doc = json.loads(data.decode("utf-8"))
-    except UnicodeDecodeError as e:
-        raise VtsError(f"not UTF-8 text ({e.reason})", path) from None
-    except json.JSONDecodeError as e:
-        raise VtsError(f"invalid JSON at line {e.lineno} column {e.colno}: {e.msg}", path) from None
+    from ..jsonio import loads
+
+    doc = loads(data, path)
     errs = schema_errors(doc, "split")
     if errs:
         more = f" (and {len(errs) - 1} more)" if len(errs) > 1 else ""

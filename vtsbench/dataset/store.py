@@ -314,7 +314,15 @@ def open_group(root: str | os.PathLike, kind: str,
         if not Path(loc).is_dir():
             raise VtsError("no such Zarr group", loc)
         store = LocalStore(loc, read_only=True)
+    if not _is_url(loc):
+        from ..jsonio import read_json
+
+        read_json(Path(loc) / "zarr.json", "Zarr metadata")  # NaN, deep nesting, a device...
     try:
         return zarr.open_group(store, mode="r", use_consolidated=True)
-    except (FileNotFoundError, ValueError, KeyError) as e:
-        raise VtsError(f"cannot open the Zarr group ({e})", loc) from None
+    except VtsError:
+        raise
+    except Exception as e:  # a changed zarr.json: zarr raises TypeError, ValueError, KeyError...
+        text = str(e).strip().splitlines()[0][:120] if str(e).strip() else ""
+        raise VtsError(f"cannot open the Zarr group ({type(e).__name__}: {text}; its zarr.json "
+                       "was changed?)", loc) from None

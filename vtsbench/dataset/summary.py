@@ -28,7 +28,7 @@ class Summary:
 
 def summarise(root: str | Path) -> Summary:
     """Read info.json and the indexes of a dataset folder (no arrays)."""
-    import pyarrow.parquet as pq
+    from .index import read_parquet
 
     root = Path(root)
     info = load_info(root)
@@ -37,7 +37,7 @@ def summarise(root: str | Path) -> Summary:
         path = root / "index" / f"{kind}.parquet"
         if not path.is_file():
             continue
-        t = pq.read_table(path, columns=["object", "state"] if kind == "slip" else ["object"])
+        t = read_parquet(path, ["object", "state"] if kind == "slip" else ["object"])
         d = t.to_pydict()
         for i, obj in enumerate(d["object"]):
             key = "static" if kind == "static" else f"slip:{d['state'][i] or 'unknown'}"
@@ -73,6 +73,7 @@ def human(n: float) -> str:
 
 def render(s: Summary, console: Any) -> None:
     """Print the summary as rich tables."""
+    from rich.markup import escape
     from rich.table import Table
 
     info = s.info
@@ -80,9 +81,10 @@ def render(s: Summary, console: Any) -> None:
     depth = (f"calibration {cal.sensor + ' / ' + cal.method if cal else 'none'}, solver "
              f"{info.build.get('solver', '?')}" if info.has_depth
              else "rgb only: no depth or contact (built with --no-depth)")
-    console.print(f"[bold]{info.name}[/] {info.dataset_version} (format {info.format_version}, "
+    console.print(f"[bold]{escape(info.name)}[/] " + escape(
+                  f"{info.dataset_version} (format {info.format_version}, "
                   f"vtsbench {info.vtsbench_version}); {info.resolution[0]}x"
-                  f"{info.resolution[1]} frames, T = {info.frames_per_sequence}; {depth}",
+                  f"{info.resolution[1]} frames, T = {info.frames_per_sequence}; {depth}"),
                   highlight=False)
     console.print(f"dataset_sha256 {info.dataset_sha256}", highlight=False)
     t = Table(title="samples per object", title_justify="left")
@@ -93,7 +95,7 @@ def render(s: Summary, console: Any) -> None:
         t.add_column(c, justify="left" if c == "object" else "right")
     tot = dict.fromkeys(cols, 0)
     for obj, row in sorted(s.by_object.items()):
-        t.add_row(obj, str(info.objects.index(obj)) if obj in info.objects else "?",
+        t.add_row(escape(obj), str(info.objects.index(obj)) if obj in info.objects else "?",
                   *(str(row.get(c, 0)) for c in cols))
         for c in cols:
             tot[c] += row.get(c, 0)
@@ -111,7 +113,7 @@ def render(s: Summary, console: Any) -> None:
     for c in ("split", "parts"):
         sp.add_column(c)
     for name, parts in info.counts.splits.items():
-        sp.add_row(name, ", ".join(f"{p} {n}" for p, n in parts.items()))
+        sp.add_row(escape(name), ", ".join(f"{p} {n}" for p, n in parts.items()))
     console.print(sp)
     sz = Table(title="on disk", title_justify="left")
     sz.add_column("folder")

@@ -29,6 +29,7 @@ class VerifyReport:
     """Problems found (empty when the dataset is intact) and what was checked."""
 
     problems: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
     files: int = 0
     samples: int = 0
     shards: int = 0
@@ -195,6 +196,10 @@ def check_arrays(root: Path, info: DatasetInfo, index: dict[str, list[SampleMeta
             except KeyError:
                 report.problems.append(f"{where}/{name}: array missing")
                 continue
+            except Exception as e:  # metadata zarr cannot use (a changed zarr.json)
+                report.problems.append(f"{where}/{name}: cannot open the array "
+                                       f"({type(e).__name__}: {_reason(e)})")
+                continue
             want = tuple(info.shapes.get(kind, {}).get(name, ()))
             bad = []
             if tuple(arr.shape) != want:
@@ -263,6 +268,10 @@ def verify(root: str | Path, *, decode: bool = True, progress: bool = False) -> 
     except VtsError as e:
         report.problems.append(str(e))
         return report
+    if not info.info_sha256:
+        report.warnings.append(f"{INFO_PATH}: format {info.format_version} carries no "
+                               "info_sha256, so a change to info.json itself goes unnoticed; "
+                               "rebuild with this vtsbench to protect it")
     with _bar(progress) as bar:
         advance = None
         if bar is not None:

@@ -228,11 +228,9 @@ def _header(data: bytes, path: Path) -> dict[str, Any]:
             raise VtsError(f"truncated calibration file ({len(data)} bytes, its header alone "
                            f"promises {8 + n})", path)
         raise VtsError("not a vtsbench calibration file (no safetensors header)", path)
-    try:
-        head = json.loads(data[8:8 + n].decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError):
-        raise VtsError("not a vtsbench calibration file (unreadable safetensors header)",
-                       path) from None
+    from ..jsonio import loads
+
+    head = loads(data[8:8 + n], path, "safetensors header")
     if not isinstance(head, dict):
         raise VtsError("not a vtsbench calibration file (unreadable safetensors header)", path)
     end = max((int(v["data_offsets"][1]) for k, v in head.items()
@@ -246,10 +244,11 @@ def _header(data: bytes, path: Path) -> dict[str, Any]:
 
 def metadata_errors(meta: Any) -> list[str]:
     """Every violation of the calibration metadata schema, one line each."""
-    import jsonschema
 
     schema = json.loads(SCHEMA_PATH.read_text())
-    v = jsonschema.Draft202012Validator(schema)
+    from ..jsonio import strict_validator
+
+    v = strict_validator(schema)
     out = []
     for err in sorted(v.iter_errors(meta), key=lambda e: list(map(str, e.absolute_path))):
         where = ".".join(map(str, err.absolute_path)) or "(top level)"
@@ -269,16 +268,15 @@ def load_calibration(path: str | Path, *, sensor: str | None = None,
     path = Path(path)
     if not path.is_file():
         raise VtsError("calibration file not found", path)
-    data = path.read_bytes()
+    from ..jsonio import loads, read_bytes
+
+    data = read_bytes(path, "calibration file")
     head = _header(data, path)
     raw = (head.get("__metadata__") or {}).get(META_KEY)
     if raw is None:
         raise VtsError("not a vtsbench calibration file (safetensors without vtsbench metadata)",
                        path)
-    try:
-        meta = json.loads(raw)
-    except json.JSONDecodeError:
-        raise VtsError("corrupt calibration file (its metadata is not JSON)", path) from None
+    meta = loads(raw, path, "calibration metadata") if isinstance(raw, str) else raw
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise VtsError(f"not a vtsbench calibration file (format {meta.get('format')!r})"
                        if isinstance(meta, dict) else "not a vtsbench calibration file", path)
@@ -300,6 +298,10 @@ def load_calibration(path: str | Path, *, sensor: str | None = None,
         tensors = load(data)
     except Exception as e:  # safetensors raises its own error type for damaged data
         raise VtsError(f"corrupt calibration file ({str(e).splitlines()[0]})", path) from None
+    for name, arr in tensors.items():  # a NaN coefficient would turn every depth into zeros
+        if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+            raise VtsError(f"corrupt calibration file (tensor {name!r} holds NaN or infinity)",
+                           path)
     bg, zero = tensors.pop("background", None), tensors.pop("zero_map", None)
     if bg is None or bg.dtype != np.uint8 or bg.shape != (*res, 3):
         raise VtsError(f"corrupt calibration file (background missing or not {res[0]}x{res[1]}"

@@ -121,8 +121,9 @@ class LutMapping(Mapping):
             cells: int = 2, **_: Any) -> LutMapping:
         from scipy import ndimage
 
-        if bins < 2 or cells < 1:
-            raise VtsError(f"lut needs --bins >= 2 and --cells >= 1, got {bins} and {cells}")
+        if not (2 <= bins <= 256 and 1 <= cells <= 64 and bins**3 * cells**2 <= 1 << 26):
+            raise VtsError(f"lut needs 2 <= --bins <= 256 and 1 <= --cells <= 64 with a table of "
+                           f"at most 2**26 entries (bins^3 x cells^2), got {bins} and {cells}")
         # One symmetric range for the three channels, wide enough for nearly every sample.
         lim = float(np.percentile(np.abs(colour), 99.9)) * 1.05 + 1.0
         params = {"bins": int(bins), "cells": [int(cells), int(cells)], "lo": -lim, "hi": lim}
@@ -335,9 +336,11 @@ class MlpMapping(Mapping):
         except ImportError:
             raise VtsError("--method mlp needs torch (pip install 'vtsbench[torch]'); "
                            "lut and poly do not") from None
-        if width < 1 or depth < 1 or epochs < 1 or not 0 <= pos_degree <= 4:
-            raise VtsError(f"mlp needs --width, --depth, --epochs >= 1 and 0 <= pos_degree <= "
-                           f"4, got {width}, {depth}, {epochs}, {pos_degree}")
+        if not (1 <= width <= 4096 and 1 <= depth <= 32 and 1 <= epochs <= 100_000
+                and 0 <= pos_degree <= 4):
+            raise VtsError(f"mlp needs 1 <= --width <= 4096, 1 <= --depth <= 32, 1 <= --epochs "
+                           f"<= 100000 and 0 <= pos_degree <= 4, got {width}, {depth}, {epochs}, "
+                           f"{pos_degree}")
         dev = torch.device(resolve_device(device) or "cpu")
         params = {"width": int(width), "depth": int(depth), "pos_degree": int(pos_degree),
                   "xy_input": bool(xy_input),

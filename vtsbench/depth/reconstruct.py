@@ -187,8 +187,11 @@ def with_colour_bar(rgb: np.ndarray, vmax: float, vmin: float) -> np.ndarray:
     return np.concatenate([rgb, gap, bar, panel], axis=1)
 
 
-def _frames(path: Path, batch: int) -> Iterator[tuple[list[str], np.ndarray]]:
-    """(names, frames) in batches from an image, an image folder or a video."""
+def _frames(path: Path, batch: int, size: tuple[int, int] | None = None
+            ) -> Iterator[tuple[list[str], np.ndarray]]:
+    """(names, frames) in batches from an image, an image folder or a video; a frame of
+    another size than `size`, or two images of one stem (a.png, a.jpg: one output name), is a
+    one-line error naming the file before anything is written for it."""
     from ..recordings.media import Capture, folder_frames, media_kind, read_image
 
     if not path.exists():
@@ -200,9 +203,20 @@ def _frames(path: Path, batch: int) -> Iterator[tuple[list[str], np.ndarray]]:
         files = folder_frames(path)
         if not files:
             raise VtsError("folder holds no images", path)
+        stems: dict[str, Path] = {}
+        for f in files:
+            if f.stem in stems:
+                raise VtsError(f"{stems[f.stem].name} and {f.name} would both be written as "
+                               f"{f.stem}.npy; rename one", path)
+            stems[f.stem] = f
         for s in range(0, len(files), batch):
             part = files[s:s + batch]
-            yield [f.stem for f in part], np.stack([read_image(f) for f in part])
+            imgs = [read_image(f) for f in part]
+            for f, img in zip(part, imgs, strict=True):
+                if size is not None and img.shape[:2] != tuple(size):
+                    raise VtsError(f"frame is {img.shape[0]}x{img.shape[1]}, the others and the "
+                                   f"calibration {size[0]}x{size[1]}", f)
+            yield [f.stem for f in part], np.stack(imgs)
     else:
         with Capture(str(path)) as cap:
             names: list[str] = []
@@ -308,7 +322,7 @@ def depth_folder(images: str | Path, calibration: str | Path, out: str | Path, *
     images, out = Path(images), Path(out)
     cal = load_calibration(calibration)
     n = 0
-    for names, frames in _frames(images, max(1, batch)):
+    for names, frames in _frames(images, max(1, batch), cal.resolution):
         if n == 0 and frames.shape[1:3] != cal.resolution:
             h, w = frames.shape[1:3]
             raise VtsError(f"frames are {h}x{w} but calibration {calibration} is for "

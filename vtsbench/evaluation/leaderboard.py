@@ -38,7 +38,6 @@ def _slug(text: str) -> str:
 
 def entry_schema_errors(doc: Any) -> list[str]:
     """Violations of schemas/leaderboard_entry.schema.json (which refers to metrics.schema)."""
-    import jsonschema
     from referencing import Registry, Resource
 
     from ..dataset.schema import SCHEMA_DIR
@@ -46,7 +45,9 @@ def entry_schema_errors(doc: Any) -> list[str]:
     sch = json.loads((SCHEMA_DIR / "leaderboard_entry.schema.json").read_text())
     ms = json.loads((SCHEMA_DIR / "metrics.schema.json").read_text())
     reg = Registry().with_resource(ms["$id"], Resource.from_contents(ms))
-    v = jsonschema.Draft202012Validator(sch, registry=reg)
+    from ..jsonio import strict_validator
+
+    v = strict_validator(sch, registry=reg)
     return [f"{'.'.join(map(str, e.absolute_path)) or '(top level)'}: {e.message}"
             for e in v.iter_errors(doc)]
 
@@ -55,6 +56,10 @@ def add(submission: str | Path, dataset: str | Path, split: str, part: str = "te
         root: str | Path = "leaderboards", meta: str | Path | None = None,
         replace: bool = False) -> Path:
     """Score a submission and store it as a leaderboard entry; returns the entry's path."""
+    for what, name in (("split", split), ("part", part)):
+        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,99}", name) or ".." in name:
+            raise VtsError(f"{what} name {name!r} must be letters, digits, '_', '-' or '.' "
+                           "(no path)")
     doc, sub, truth = evaluate(submission, dataset, split, part, meta=meta)
     folder = Path(root) / _slug(truth.dataset) / split
     eid = f"{_slug(str(sub.meta['method']))}-{sub.sha256[:8]}"
@@ -73,7 +78,7 @@ def add(submission: str | Path, dataset: str | Path, split: str, part: str = "te
             t: {str(s): a.tolist() for s, a in by.items()} for t, by in sub.preds.items()}},
     }
     folder.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(path, json.dumps(entry, indent=1) + "\n")
+    write_text_atomic(path, json.dumps(entry, indent=1, allow_nan=False) + "\n")
     return path
 
 
@@ -81,10 +86,9 @@ def entries(folder: Path) -> list[tuple[Path, dict[str, Any]]]:
     """The entries of one dataset/split folder, each checked against its schema."""
     out = []
     for p in sorted(folder.glob("*.json")):
-        try:
-            doc = json.loads(p.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError) as e:
-            raise VtsError(f"unreadable leaderboard entry ({e})", p) from None
+        from ..jsonio import read_json
+
+        doc = read_json(p, "leaderboard entry")
         errs = entry_schema_errors(doc)
         if errs:
             raise VtsError(f"invalid leaderboard entry: {errs[0]}", p)
@@ -175,9 +179,17 @@ def _summary_columns(kind: str) -> list[Column]:
     return [*head, ("metric version", lambda e: e["metric_version"])]
 
 
+def md_cell(value: Any) -> str:
+    """A table cell of user text: one line, markdown and HTML characters escaped, so a method
+    name cannot add rows, links or markup to leaderboard.md."""
+    text = " ".join(str(value).split())
+    text = re.sub(r"([\\`*|])", r"\\\1", text).replace("](", "]\\(").replace("][", "]\\[")
+    return text.replace("<", "&lt;").replace(">", "&gt;")[:200]
+
+
 def _table(cols: list[Column], rows: list[dict[str, Any]]) -> list[str]:
     out = ["| " + " | ".join(c for c, _ in cols) + " |", "|---" * len(cols) + "|"]
-    return out + ["| " + " | ".join(str(f(r)).replace("|", "/") for _, f in cols) + " |"
+    return out + ["| " + " | ".join(md_cell(f(r)) for _, f in cols) + " |"
                   for r in rows]
 
 
@@ -190,7 +202,8 @@ def render_folder(folder: Path) -> str:
     main = "state" if kind == "slip" else "object"
     es.sort(key=lambda e: -(_mean(e, main, "accuracy") or -1.0))
     split = es[0]["split"]
-    lines = [f"# {es[0]['dataset']['name']} / {split} ({es[0]['part']})", "",
+    lines = [f"# {md_cell(es[0]['dataset']['name'])} / {md_cell(split)} "
+             f"({md_cell(es[0]['part'])})", "",
              f"{len(es)} entries, best {main} accuracy first; mean ± standard deviation over "
              "seeds where there are several.", ""]
     cols = _summary_columns(kind)

@@ -10,7 +10,6 @@ recipe, seeds, dataset version and checksum, vtsbench version
 
 from __future__ import annotations
 
-import csv
 import hashlib
 import json
 import math
@@ -28,7 +27,9 @@ from ..labels import DIRECTION_NAMES, STATES
 TASKS = {"state": "slip", "direction": "slip", "object": "static"}
 SLIP = STATES.index("slip")
 MAX_SHOWN = 3
-_INT = re.compile(r"[+-]?\d+")
+#: An integer of at most 18 digits: longer is no class index or seed (and int() of thousands
+#: of digits raises)
+_INT = re.compile(r"[+-]?\d{1,18}")
 
 
 @dataclass
@@ -55,7 +56,6 @@ class Truth:
 
 def load_truth(dataset: str | Path, split: str, part: str = "test") -> Truth:
     """Labels of a split part from info.json, the split file and the index (no arrays read)."""
-    import pyarrow.parquet as pq
 
     from ..dataset.schema import load_info
     from ..dataset.splits import read_split
@@ -72,7 +72,9 @@ def load_truth(dataset: str | Path, split: str, part: str = "test") -> Truth:
     cols = ["sample_id", "object", "class_idx"]
     if sp.kind == "slip":
         cols += ["state_idx", "direction"]
-    table = pq.read_table(root / "index" / f"{sp.kind}.parquet", columns=cols).to_pydict()
+    from ..dataset.index import read_parquet
+
+    table = read_parquet(root / "index" / f"{sp.kind}.parquet", cols).to_pydict()
     pos = {s: i for i, s in enumerate(table["sample_id"])}
     ids = sorted(sp.parts[part])
     rows = [pos[s] for s in ids if s in pos]
@@ -131,29 +133,29 @@ def default_meta_path(path: Path) -> Path:
 
 def read_rows(path: Path) -> dict[str, list[Any]]:
     """Columns of a CSV or parquet submission (CSV values as text)."""
+    from ..jsonio import read_csv, regular_file
+
     if not path.is_file():
         raise VtsError("submission not found", path)
     if path.suffix.lower() == ".parquet":
         import pyarrow.parquet as pq
 
+        regular_file(path, "submission")
         try:
-            return pq.read_table(path).to_pydict()
+            table = pq.read_table(path)
         except Exception as e:
             raise VtsError(f"not a readable parquet file ({type(e).__name__})", path) from None
-    try:
-        with path.open(newline="", encoding="utf-8-sig") as fh:
-            reader = csv.reader(fh)
-            header = next(reader, None)
-            body = list(reader)
-    except UnicodeDecodeError as e:
-        raise VtsError(f"not UTF-8 text ({e.reason})", path) from None
-    if header is None:
+        names = [n.strip().lower() for n in table.column_names]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise VtsError(f"column name {dup[0]!r} appears more than once", path)
+        return table.to_pydict()
+    rows = read_csv(path, "submission CSV")
+    if not rows:
         return {}
-    header = [h.strip() for h in header]
+    header, body = rows[0], rows[1:]
     cols: dict[str, list[Any]] = {h: [] for h in header}
     for r in body:
-        if not r:
-            continue
         for h, v in zip(header, r + [""] * (len(header) - len(r)), strict=False):
             cols[h].append(v)
     return cols
@@ -191,11 +193,9 @@ def read_meta(path: Path) -> dict[str, Any]:
     if not path.is_file():
         raise VtsError("metadata file not found (write it beside the submission as "
                        f"{path.name} or pass --meta)", path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise VtsError(f"metadata is not valid JSON ({e})", path) from None
-    return doc
+    from ..jsonio import read_json
+
+    return read_json(path, "metadata JSON")
 
 
 def schema_errors(doc: Any, at: str) -> list[str]:
@@ -203,11 +203,12 @@ def schema_errors(doc: Any, at: str) -> list[str]:
     from ..dataset import schema as ds
 
     doc_schema = json.loads((ds.SCHEMA_DIR / "submission.schema.json").read_text())
-    import jsonschema
 
     sch = {"$schema": doc_schema["$schema"], "$defs": doc_schema["$defs"],
            "$ref": f"#/$defs/{at}"}
-    v = jsonschema.Draft202012Validator(sch)
+    from ..jsonio import strict_validator
+
+    v = strict_validator(sch)
     return [f"{'.'.join(map(str, e.absolute_path)) or '(top level)'}: {e.message}"
             for e in v.iter_errors(doc)]
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections import Counter, defaultdict
 from concurrent.futures import ThreadPoolExecutor
@@ -11,7 +12,7 @@ from pathlib import Path
 from ..errors import VtsError
 from ..labels import direction_class
 from .manifest import MANIFEST_NAME, Entry, Manifest, read_manifest_doc, schema_errors
-from .media import Probe, media_kind, probe
+from .media import Probe, folder_frames, frame_notes, media_kind, probe
 
 
 @dataclass
@@ -35,6 +36,7 @@ class _Media:
     probe: Probe | None = None
     error: str | None = None
     bad_frames: dict[int, str] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
 
 
 def check_folder(folder: str | Path, deep: bool = False, workers: int = 2,
@@ -61,6 +63,7 @@ def check_folder(folder: str | Path, deep: bool = False, workers: int = 2,
     report.n_entries = len(m.entries)
     _check_ids(m, report)
     media = _open_media(folder, m, deep, workers, decode, progress)
+    report.warnings += [n for med in media.values() for n in med.notes]
     _check_sessions(folder, m, media, report)
     for e in m.entries:
         _check_entry(folder, m, e, media, report)
@@ -132,6 +135,10 @@ def _open_media(folder: Path, m: Manifest, deep: bool, workers: int,
             return rel, out
         if out.probe.kind == "video":
             out.probe, out.bad_frames = _video_frames(path, out.probe, sorted(need[rel]), deep)
+        elif decode:  # what decoding does to a 16-bit or EXIF-oriented frame
+            first = path if out.probe.kind == "image" else folder_frames(path)[0]
+            with contextlib.suppress(VtsError):
+                out.notes = [f"{first}: {n}" for n in frame_notes(first)]
         return rel, out
 
     lines = LineProgress() if progress and not is_terminal() else None

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import csv
+import math
 import os
 import re
 import sys
@@ -99,30 +99,32 @@ def _labels(fields: dict[str, str], rel: str) -> Labels:
 
 def read_circles(path: Path) -> dict[str, Circle]:
     """Read a circles CSV into {file name: Circle}; one-line errors naming the row."""
-    if not path.is_file():
-        raise VtsError("circles file not found", path)
-    with path.open(newline="", encoding="utf-8-sig") as fh:
-        reader = csv.DictReader(fh)
-        header = [h.strip().lower() for h in (reader.fieldnames or [])]
-        cols = {}
-        for key, names in CIRCLE_COLUMNS.items():
-            hit = [h for h in header if h in names]
-            if not hit:
-                raise VtsError(f"no '{key}' column (accepted: {', '.join(names)}); "
-                               f"found {', '.join(header) or 'no header'}", path)
-            cols[key] = (reader.fieldnames or [])[header.index(hit[0])]
-        out: dict[str, Circle] = {}
-        for i, row in enumerate(reader, start=2):
-            name = (row.get(cols["file"]) or "").strip()
-            try:
-                x, y, r = (float(row[cols[k]]) for k in ("x", "y", "r"))
-            except (TypeError, ValueError):
-                raise VtsError(f"row {i}: x, y and r must be numbers", path) from None
-            if not name or r <= 0:
-                raise VtsError(f"row {i}: needs a file name and a positive radius", path)
-            if name in out:
-                raise VtsError(f"row {i}: '{name}' listed twice", path)
-            out[name] = Circle(x, y, r)
+    from ..jsonio import read_csv
+
+    rows = read_csv(path, "circles CSV")
+    header = [h.lower() for h in rows[0]] if rows else []
+    cols = {}
+    for key, names in CIRCLE_COLUMNS.items():
+        hit = [h for h in header if h in names]
+        if not hit:
+            raise VtsError(f"no '{key}' column (accepted: {', '.join(names)}); "
+                           f"found {', '.join(header) or 'no header'}", path)
+        cols[key] = header.index(hit[0])
+    out: dict[str, Circle] = {}
+    for i, cells in enumerate(rows[1:], start=2):
+        row = cells + [""] * (len(header) - len(cells))
+        name = row[cols["file"]].strip()
+        try:
+            x, y, r = (float(row[cols[k]]) for k in ("x", "y", "r"))
+        except (TypeError, ValueError):
+            raise VtsError(f"row {i}: x, y and r must be numbers", path) from None
+        if not all(math.isfinite(v) for v in (x, y, r)):
+            raise VtsError(f"row {i}: x, y and r must be finite numbers", path)
+        if not name or r <= 0:
+            raise VtsError(f"row {i}: needs a file name and a positive radius", path)
+        if name in out:
+            raise VtsError(f"row {i}: '{name}' listed twice", path)
+        out[name] = Circle(x, y, r)
     return out
 
 

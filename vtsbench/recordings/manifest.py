@@ -234,7 +234,7 @@ class Manifest:
         return d
 
     def to_json(self) -> str:
-        return json.dumps(self.to_dict(), indent=1, sort_keys=False) + "\n"
+        return json.dumps(self.to_dict(), indent=1, sort_keys=False, allow_nan=False) + "\n"
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Manifest:
@@ -269,7 +269,9 @@ def schema_errors(doc: Any) -> list[str]:
 def _schema_errors(doc: Any) -> list[str]:
     import jsonschema
 
-    validator = jsonschema.Draft202012Validator(schema())
+    from ..jsonio import strict_validator
+
+    validator = strict_validator(schema())
     out = []
     for err in sorted(validator.iter_errors(doc), key=lambda e: list(map(str, e.absolute_path))):
         where = _json_path(doc, list(err.absolute_path))
@@ -303,12 +305,9 @@ def read_manifest_doc(folder: str | Path) -> tuple[Path, Any]:
     if not path.is_file():
         raise VtsError(f"no {MANIFEST_NAME} (write one with `vtsbench manifest` or "
                        "`vtsbench collect`)", folder)
-    try:
-        return path, json.loads(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError as e:
-        raise VtsError(f"not UTF-8 text ({e.reason})", path) from None
-    except json.JSONDecodeError as e:
-        raise VtsError(f"invalid JSON at line {e.lineno} column {e.colno}: {e.msg}", path) from None
+    from ..jsonio import read_json
+
+    return path, read_json(path)
 
 
 def load_manifest(folder: str | Path) -> Manifest:
@@ -327,8 +326,8 @@ def save_manifest(folder: str | Path, manifest: Manifest) -> Path:
 
     doc = manifest.to_dict()
     errs = schema_errors(doc)
-    if errs:
-        raise ValueError(f"refusing to write an invalid manifest: {errs[0]}")
     path = Path(folder) / MANIFEST_NAME
+    if errs:  # options that make an invalid manifest (a negative radius, a session '../x'...)
+        raise VtsError(f"refusing to write an invalid manifest: {errs[0]}", path)
     write_text_atomic(path, manifest.to_json())
     return path

@@ -42,28 +42,23 @@ def folder_frames(path: Path) -> list[Path]:
     return sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_EXTS)
 
 
+#: Largest image file read (bytes); OpenCV's own pixel limit (CV_IO_MAX_IMAGE_PIXELS, 2**30 by
+#: default) refuses images that declare more pixels than that.
+MAX_IMAGE_BYTES = 512 << 20
+
+
 def read_image(path: Path, out: np.ndarray | None = None) -> np.ndarray:
-    """One image file as RGB uint8; one-line error if missing or undecodable.
+    """One image file as RGB uint8; one-line error if missing, not a regular file (a FIFO or a
+    device would block or never end), over MAX_IMAGE_BYTES, or undecodable.
 
-    PNGs of 8-bit RGB rows sharing one filter (what vtsbench writes) are decoded by
-    `vtsbench.recordings.png` (about 2x OpenCV for Up rows); anything else by OpenCV, straight to
-    RGB (IMREAD_COLOR_RGB, OpenCV >= 4.11) rather than to BGR and then swapped.
-    out: a uint8 (H, W, 3) array the fast path decodes into when the image has its shape (a
-    shard's row: no copy); the result is returned either way, in out or not."""
-    from .png import SIGNATURE, decode_rgb
+    Decoded by OpenCV (libpng, libjpeg...) with its documented behaviour: straight to RGB
+    (IMREAD_COLOR_RGB, OpenCV >= 4.11), EXIF orientation applied, 16-bit samples scaled to 8
+    bits, images over its pixel limit refused (`frame_notes` says which of these applies).
+    out: unused by the decoder (kept for callers that pass a shard's row); the result is
+    returned in a new array."""
+    from ..jsonio import read_bytes
 
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise VtsError("file not found", path) from None
-    except IsADirectoryError:
-        raise VtsError("is a folder, not an image", path) from None
-    except OSError as e:
-        raise VtsError(f"cannot read ({e.strerror or e})", path) from None
-    if data[:8] == SIGNATURE:
-        img = decode_rgb(data, out)
-        if img is not None:
-            return img
+    data = read_bytes(path, "image", MAX_IMAGE_BYTES)
     cv2 = _cv2()
     rgb = getattr(cv2, "IMREAD_COLOR_RGB", None)
     if not data:
@@ -87,27 +82,36 @@ class Probe:
     width: int
 
 
-def png_size(path: Path) -> tuple[int, int] | None:
-    """(height, width) from a PNG file's header (IHDR) without decoding it; None when the file
-    does not start like a PNG."""
-    from .png import SIGNATURE
+def frame_notes(path: Path) -> list[str]:
+    """What decoding does to an image file beyond reading it: 16-bit samples scaled to 8 bits,
+    an EXIF orientation applied (OpenCV's documented behaviour); [] for a plain 8-bit frame."""
+    from ..jsonio import read_bytes
 
+    cv2 = _cv2()
+    buf = np.frombuffer(read_bytes(path, "image", MAX_IMAGE_BYTES), np.uint8)
+    notes = []
     try:
-        with open(path, "rb") as fh:
-            head = fh.read(24)
-    except OSError:
-        return None
-    if len(head) < 24 or head[:8] != SIGNATURE or head[12:16] != b"IHDR":
-        return None
-    w, h = int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
-    return (h, w) if h > 0 and w > 0 else None
+        raw = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED | cv2.IMREAD_IGNORE_ORIENTATION)
+        turned = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+    except cv2.error:
+        return notes
+    if raw is None or turned is None:
+        return notes
+    if raw.dtype != np.uint8:
+        notes.append(f"{raw.dtype.itemsize * 8}-bit samples: decoded to 8 bits (value / 257, "
+                     "OpenCV IMREAD_COLOR)")
+    if raw.shape[:2] != turned.shape[:2]:
+        notes.append("EXIF orientation: the frame is rotated as its EXIF tag says "
+                     f"({raw.shape[1]}x{raw.shape[0]} stored, {turned.shape[1]}x"
+                     f"{turned.shape[0]} read)")
+    else:
+        plain = cv2.imdecode(buf, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+        if plain is not None and not np.array_equal(plain, turned):
+            notes.append("EXIF orientation: the frame is flipped or turned as its EXIF tag says")
+    return notes
 
 
 def _image_size(path: Path, decode: bool) -> tuple[int, int]:
-    if not decode and path.suffix.lower() == ".png":
-        size = png_size(path)
-        if size is not None:
-            return size
     img = read_image(path)  # also the one-line error for a missing or undecodable file
     return img.shape[0], img.shape[1]
 
@@ -115,11 +119,15 @@ def _image_size(path: Path, decode: bool) -> tuple[int, int]:
 def probe(path: Path, decode: bool = True) -> Probe:
     """Frame count and size of a source, reading as little as possible.
 
-    decode=False: a PNG's size comes from its header (a body that does not decode is then
-    found when the frame is read); other images are decoded either way."""
+    Images are decoded by the library either way (decode is kept for callers): no
+    hand-written header parsing of a user file."""
     if not path.exists():
         raise VtsError("file not found", path)
     kind = media_kind(path)
+    if kind == "video":
+        from ..jsonio import regular_file
+
+        regular_file(path, "video")
     if kind == "image":
         return Probe(kind, 1, *_image_size(path, decode))
     if kind == "folder":
@@ -170,6 +178,9 @@ def read_frames(path: Path, start: int = 0, stop: int | None = None,
             if not np.shares_memory(img, out[t]):
                 out[t] = img  # one copy per frame, not a stack and then a copy into the shard
         return out
+    from ..jsonio import regular_file
+
+    regular_file(path, "video")
     frames = _read_video(path, start, stop)
     if out is not None and out.shape == frames.shape:
         out[...] = frames
@@ -233,6 +244,10 @@ class Capture:
         else:
             path = Path(text)
             self.name = str(path)
+            if path.exists():
+                from ..jsonio import regular_file
+
+                regular_file(path, "video")
             info = probe(path)  # missing, unsupported type, or undecodable: one-line errors
             if info.kind != "video":
                 raise VtsError(f"not a video file but an {info.kind} (--source takes a camera "
@@ -272,12 +287,10 @@ def write_png(path: Path, rgb: np.ndarray, compression: int = 1) -> None:
 
     Huffman-only deflate: tactile frames carry sensor noise that defeats LZ matching; measured on
     a noisy 480x640 frame, 14.8 ms and 14 % smaller against 20.1 ms for the default strategy.
-    One row filter, Up, instead of libpng choosing one per row: lossless as any filter, and the
-    one `vtsbench.recordings.png` unfilters fastest (whole-array additions down the columns).
-    On 48 simulated 480x640 frames (one core of a 2-core AMD EPYC): Up 494 kB, written in
-    8.9 ms, decoded in 2.0 ms by vtsbench and 4.1 ms by OpenCV; Sub 497 kB, 9.4, 2.9 and 4.4 ms;
-    libpng's choice per row 480 kB and 15.1 ms to write (Paeth rows, which it also picks, take
-    8.7 ms to decode with OpenCV and go to OpenCV here).
+    One row filter, Up, instead of libpng choosing one per row: lossless as any filter and quick
+    to unfilter. On 48 simulated 480x640 frames (one core of a 2-core AMD EPYC): Up 494 kB,
+    written in 8.9 ms, decoded in 4.1 ms by OpenCV; Sub 497 kB, 9.4 and 4.4 ms; libpng's choice
+    per row 480 kB and 15.1 ms to write (its Paeth rows take 8.7 ms to decode).
     """
     cv2 = _cv2()
     ok, buf = cv2.imencode(".png", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR),

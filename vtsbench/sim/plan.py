@@ -87,7 +87,8 @@ def ball_contact_radius_mm(depth_mm: float) -> float:
 
 def max_press_depth_mm(size: tuple[int, int], mm_per_px: float) -> float:
     """Deepest calibration press whose contact stays inside the frame (with clearance)."""
-    a = min(size) * mm_per_px / 2.0 - PRESS_CLEARANCE_MM
+    # centres lie in [reach, size - 1 - reach] (pixel centres 0..size-1): half of size - 1
+    a = (min(size) - 1) * mm_per_px / 2.0 - PRESS_CLEARANCE_MM
     if a >= BALL_RADIUS_MM:
         return PRESS_DEPTH_MM[1]
     if a <= 0.0:
@@ -147,7 +148,7 @@ def press_scene(rng: np.random.Generator, size: tuple[int, int], mm_per_px: floa
     height, width = size
     depth = float(rng.uniform(PRESS_DEPTH_MM[0], max_press_depth_mm(size, mm_per_px)))
     reach = (ball_contact_radius_mm(depth) + PRESS_CLEARANCE_MM) / mm_per_px
-    cx = float(rng.uniform(reach, width - 1 - reach))
-    cy = float(rng.uniform(reach, height - 1 - reach))
+    cx = float(rng.uniform(min(reach, (width - 1) / 2), max(reach, width - 1 - reach)))
+    cy = float(rng.uniform(min(reach, (height - 1) / 2), max(reach, height - 1 - reach)))
     obj = random_instance(BALL, rng)
     return Scene(obj, ((cx, cy),), (depth,), size, mm_per_px, Effects(texture=False))

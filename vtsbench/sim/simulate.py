@@ -216,7 +216,7 @@ def simulate(out: str | Path, *, seed: int = 0, n_static: int = 30, n_sequences:
     _check_args(n_static, n_sequences, n_presses, n_objects, size, frames, n_sessions,
                 mm_per_px, workers, seed)
     plans = make_plans(seed, n_static, n_sequences, n_presses, n_objects, n_sessions)
-    with staged_dir(out, overwrite) as stage:
+    with staged_dir(out, overwrite, marker="recordings.json") as stage:
         sessions, captures = [], []
         fields = sensor(size[0], size[1], mm_per_px)
         for s in range(n_sessions):

@@ -82,6 +82,18 @@ class _Tree:
                  threshold: np.ndarray, label: np.ndarray) -> None:
         self.left, self.right, self.feature = left, right, feature
         self.threshold, self.label = threshold, label
+        n = len(left)
+        nodes = np.arange(n)
+        inner = left != -1
+        # children come after their node (sklearn's order), so a stored tree cannot loop
+        if not (n and all(a.ndim == 1 and len(a) == n for a in self.arrays().values())
+                and np.array_equal(inner, right != -1)
+                and np.all((left[inner] > nodes[inner]) & (left[inner] < n))
+                and np.all((right[inner] > nodes[inner]) & (right[inner] < n))
+                and np.all((feature[inner] >= 0) & (feature[inner] < len(FEATURES)))
+                and np.all(np.isfinite(threshold[inner]))):
+            raise ValueError("not a valid decision tree (a loop, a child out of range, or a "
+                             "feature or threshold it cannot use)")
 
     @classmethod
     def fit(cls, x: np.ndarray, y: np.ndarray, max_depth: int, seed: int) -> _Tree:
@@ -172,8 +184,11 @@ class FlowRecipe(Recipe):
                 raise VtsError("not a flow recipe checkpoint", checkpoint)
             arrays = {k: fh.get_tensor(k) for k in fh.keys()}  # noqa: SIM118 - not a dict
         config = json.loads(meta["config"])
-        tree = _Tree(arrays["tree.left"], arrays["tree.right"], arrays["tree.feature"],
-                     arrays["tree.threshold"], arrays["tree.label"])
+        try:
+            tree = _Tree(arrays["tree.left"], arrays["tree.right"], arrays["tree.feature"],
+                         arrays["tree.threshold"], arrays["tree.label"])
+        except (KeyError, ValueError) as e:
+            raise VtsError(f"corrupt flow checkpoint ({e})", checkpoint) from None
         view = vtsbench.load(dataset_path).split(split, part)
         rows: list[dict[str, Any]] = []
         self.latency_s = []
