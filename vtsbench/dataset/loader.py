@@ -182,7 +182,8 @@ class KindStore:
         if str(arr.dtype) != store.DTYPES[name]:
             raise VtsError(f"dtype {arr.dtype} contradicts the format ({store.DTYPES[name]})",
                            where)
-        scale = arr.attrs.get("scale") if name == "depth" else None
+        # format 1.1 writes the CF scale_factor, 1.0 wrote scale
+        scale = arr.attrs.get("scale_factor", arr.attrs.get("scale")) if name == "depth" else None
         if scale is not None and scale != self.info.depth_scale_mm:
             raise VtsError(f"depth scale {scale} mm contradicts info.json depth_scale_mm "
                            f"{self.info.depth_scale_mm}; run `vtsbench verify`", where)
