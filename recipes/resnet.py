@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from vtsbench.errors import VtsError
@@ -48,6 +49,40 @@ class _Normalized(torch.nn.Module):
         return self.net(_normalize(x, self.modality, self.depth_scale_mm))
 
 
+class StaticCrops:
+    """A static split part as (x (C, S, S) float32, target) cut around each frame's contact
+    (`vtsbench.models.contact_crop`), kept in memory once cut when it fits in `cache_mb`:
+    the object's imprint at the resolution it has on the sensor, not shrunk with the frame."""
+
+    def __init__(self, view: Any, config: dict[str, Any], size: int,
+                 cache_mb: float = 2048.0) -> None:
+        self.view, self.config, self.size = view, config, size
+        chans = 1 if config["modality"] == "depth" else 3
+        need = len(view) * chans * size * size * 4 / 2**20
+        self.cache: dict[int, Any] | None = {} if need <= cache_mb else None
+
+    def __len__(self) -> int:
+        return len(self.view)
+
+    def __getitem__(self, i: int) -> Any:
+        from vtsbench.models.contact_crop import contact_crop
+
+        if self.cache is not None and i in self.cache:
+            return self.cache[i]
+        s = self.view[i]
+        seq = {"rgb": s["rgb"][None],
+               "contact": None if s.get("contact") is None else s["contact"][None]}
+        if "depth" in s:
+            seq["depth"] = s["depth"][None]
+        x, _ = contact_crop(seq, int(self.config["crop_px"]), self.size, self.config["modality"])
+        cls = -1 if s.get("class_idx") is None else int(s["class_idx"])
+        item = (torch.from_numpy(np.ascontiguousarray(x[0])),
+                {"sample_id": s["sample_id"], "class_idx": torch.tensor(cls)})
+        if self.cache is not None:
+            self.cache[i] = item
+        return item
+
+
 class ResnetRecipe(Recipe):
     name = "resnet"
     tasks = ("object",)
@@ -64,7 +99,10 @@ class ResnetRecipe(Recipe):
             "pretrained_path": None,    # torchvision ImageNet state dict (.pth/.safetensors)
             "augment": True,
             "jitter": 0.3,
-            "max_rotation": 15.0,
+            "max_rotation": 180.0,      # any rotation: a static imprint's class does not
+                                        # depend on how the object was turned
+            "crop_px": 320,             # square of sensor px around the contact, resized to
+                                        # image_size; None: the whole frame
             "crop_scale": [0.8, 1.0],
             "steps": 300,
             "batch_size": 16,
@@ -91,6 +129,8 @@ class ResnetRecipe(Recipe):
     @staticmethod
     def _data(view: Any, config: dict[str, Any]) -> Any:
         size = int(config["image_size"])
+        if config.get("crop_px"):
+            return StaticCrops(view, config, size)
         return view.to_torch(config["modality"], size=(size, size))
 
     def train(self, dataset_path: str | Path, split: str, out_dir: str | Path,

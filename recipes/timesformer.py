@@ -17,6 +17,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from vtsbench.errors import VtsError
 from vtsbench.labels import STATES
 from vtsbench.recipes import Recipe, progress_iter
@@ -36,26 +38,78 @@ def _frames(x: Any, modality: str, depth_scale_mm: float) -> Any:
     return out
 
 
+INPUTS = ("frames", "delta", "frames+delta")
+
+
 def input_mode(config: dict[str, Any]) -> str:
-    """`input` of a config; null: `frames` for the paper's pretrained model (its SSv2 weights
-    saw frames), `delta` for the small one."""
-    mode = config.get("input") or ("frames" if config.get("config") == "paper" else "delta")
-    if mode not in ("frames", "delta"):
-        raise VtsError(f"input must be 'frames' or 'delta', not {mode!r}")
+    """`input` of a config; null: `frames+delta` (each frame and its difference to the first)."""
+    mode = config.get("input") or "frames+delta"
+    if mode not in INPUTS:
+        raise VtsError(f"input must be one of {', '.join(INPUTS)}, not {mode!r}")
     return mode
 
 
 def _normalize(x: Any, config: dict[str, Any]) -> Any:
-    """The model's input from a batch (B, T, C, H, W): `frames` as they are (normalised), or
-    `delta`: each frame minus the sequence's first, times `delta_gain`, clipped to [-1, 1].
+    """The model's input from a batch (B, T, C, H, W): `frames` as they are (normalised),
+    `delta`: each frame minus the sequence's first, times `delta_gain`, clipped to [-1, 1], or
+    `frames+delta`: both, concatenated along the channels (2C channels).
 
-    Trained from scratch on a few hundred sequences, the small model sees little but the gel's
-    static shading in raw frames: on the demo's benchmark (216 training sequences, 250 steps)
-    raw frames gave 33.3 % state accuracy on unseen objects (one class), the differences 95.5 %."""
+    A difference alone does not say which way a texture moved (I(x - d) - I(x) of a periodic
+    texture is the same pattern for +d and a shifted -d): on the demo's benchmark the `delta`
+    input left the direction head at chance (13.5 % unseen objects, 25.9 % seen), while the
+    state head learnt (96.4 %). The frame beside its difference resolves the sign."""
     x = _frames(x, config["modality"], float(config["depth_scale_mm"]))
-    if input_mode(config) == "frames":
+    mode = input_mode(config)
+    if mode == "frames":
         return x
-    return ((x - x[:, :1]) * float(config.get("delta_gain", 4.0))).clamp(-1.0, 1.0)
+    delta = ((x - x[:, :1]) * float(config.get("delta_gain", 4.0))).clamp(-1.0, 1.0)
+    return delta if mode == "delta" else torch_cat((x, delta), dim=2)
+
+
+def torch_cat(parts: Any, dim: int) -> Any:
+    import torch
+
+    return torch.cat(parts, dim=dim)
+
+
+class CropData:
+    """A split part as (x (T, C, S, S) float32, target) cut around each sequence's contact
+    (`vtsbench.models.contact_crop`), held in memory once cut when it fits in `cache_mb`."""
+
+    def __init__(self, view: Any, config: dict[str, Any], size: int, frames: int,
+                 cache_mb: float = 2048.0) -> None:
+        from vtsbench.dataset.torch_dataset import frame_numbers
+
+        self.view, self.config, self.size = view, config, size
+        self.frames = frames
+        self.frame_numbers = frame_numbers
+        chans = {"rgb": 3, "depth": 1, "rgbd": 4}[config["modality"]]
+        need = len(view) * frames * chans * size * size * 4 / 2**20
+        self.cache: dict[int, Any] | None = {} if need <= cache_mb else None
+        self.scale: tuple[float, float] | None = None
+
+    def __len__(self) -> int:
+        return len(self.view)
+
+    def __getitem__(self, i: int) -> Any:
+        import torch
+
+        from vtsbench.models.contact_crop import contact_crop
+
+        if self.cache is not None and i in self.cache:
+            return self.cache[i]
+        s = self.view[i]
+        x, self.scale = contact_crop(s, int(self.config["crop_px"]), self.size,
+                                     self.config["modality"])
+        x = x[self.frame_numbers(len(x), self.frames)]
+        state = -1 if s.get("state_idx") is None else int(s["state_idx"])
+        direction = -1 if s.get("direction") is None else int(s["direction"])
+        item = (torch.from_numpy(np.ascontiguousarray(x)),
+                {"sample_id": s["sample_id"], "state_idx": torch.tensor(state),
+                 "direction": torch.tensor(direction)})
+        if self.cache is not None:
+            self.cache[i] = item
+        return item
 
 
 class TimesformerRecipe(Recipe):
@@ -65,6 +119,8 @@ class TimesformerRecipe(Recipe):
     def __init__(self) -> None:
         #: seconds of forward pass per sequence measured by the last predict
         self.latency_s: list[float] = []
+        #: model-input pixels per sensor pixel (x, y) of the last predict
+        self.input_scale_xy: tuple[float, float] | None = None
 
     def default_config(self) -> dict[str, Any]:
         return {
@@ -74,14 +130,17 @@ class TimesformerRecipe(Recipe):
             "num_frames": None,         # None: the config's (8)
             "pretrained_path": None,    # folder with the paper's weights (paper: HF cache too)
             "lambda_dir": 1.0,          # weight of the direction term of the masked loss
-            "flip": True,               # mirror sequences (labels mapped) while training
+            "flip": True,               # mirror sequences (labels mapped) while training;
+                                        # with crop_px also quarter turns (8 symmetries)
             "slip_oversample": 3,       # draw slipping training sequences this many times
-            "input": None,              # frames | delta (each frame minus the first);
-                                        # None: delta for small, frames for paper
+            "input": None,              # frames | delta (each frame minus the first) |
+                                        # frames+delta (both; None: frames+delta)
             "delta_gain": 4.0,          # delta input: gain before clipping to [-1, 1]
-            "steps": 300,
+            "crop_px": 320,             # square of this many sensor px around the contact,
+                                        # resized to image_size; None: the whole frame
+            "steps": 400,
             "batch_size": 8,
-            "lr": 3e-4,
+            "lr": 5e-4,
             "weight_decay": 0.05,
             "warmup_steps": 20,
             "schedule": "cosine",
@@ -111,13 +170,24 @@ class TimesformerRecipe(Recipe):
         return DualHeadTimesformer.from_config(
             config["config"], config["modality"], config["pretrained_path"],
             pretrained=pretrained, image_size=config["image_size"],
-            num_frames=config["num_frames"], dropout=float(config["dropout"]))
+            num_frames=config["num_frames"], dropout=float(config["dropout"]),
+            with_delta=input_mode(config) == "frames+delta")
 
     @staticmethod
     def _view_torch(view: Any, model: Any, config: dict[str, Any]) -> Any:
         size = int(model.config.image_size)
-        return view.to_torch(config["modality"], size=(size, size),
-                             frames=int(model.config.num_frames))
+        frames = int(model.config.num_frames)
+        if config.get("crop_px"):
+            return CropData(view, config, size, frames)
+        return view.to_torch(config["modality"], size=(size, size), frames=frames)
+
+    @staticmethod
+    def _input_scale(view: Any, data: Any, size: int) -> tuple[float, float]:
+        """Model-input pixels per sensor pixel (x, y)."""
+        if isinstance(data, CropData) and data.scale is not None:
+            return data.scale
+        h, w = view.dataset.info.resolution if hasattr(view, "dataset") else (size, size)
+        return size / w, size / h
 
     # -- train / predict --------------------------------------------------------------------
 
@@ -128,7 +198,8 @@ class TimesformerRecipe(Recipe):
         from torch.utils.data import Subset
 
         import vtsbench
-        from vtsbench.models.timesformer import flip_augment, masked_joint_loss
+        from vtsbench.models.timesformer import (dihedral_augment, flip_augment,
+                                                 masked_joint_loss)
         from vtsbench.training import TrainConfig, seed_everything, train_loop
 
         self._check(config)
@@ -154,7 +225,10 @@ class TimesformerRecipe(Recipe):
             if config.get("flip", False):
                 # drawn from the global torch RNG, which the checkpoints hold: exact resume
                 g = torch.Generator().manual_seed(int(torch.randint(0, 2**62, (1,))))
-                x, direction = flip_augment(x, direction, g)
+                # square contact crops allow quarter turns too; resized whole frames mirrors
+                # only (see flip_augment)
+                aug = dihedral_augment if config.get("crop_px") else flip_augment
+                x, direction = aug(x, direction, g)
             x = _normalize(x.to(dev), config)
             state_logits, dir_logits = net(x)
             return masked_joint_loss(state_logits, dir_logits, target["state_idx"].to(dev),
@@ -200,6 +274,7 @@ class TimesformerRecipe(Recipe):
                 sid = target["sample_id"]
                 rows.append({"sample_id": sid, "task": "state", "pred": STATES[int(ps.argmax())]})
                 rows.append({"sample_id": sid, "task": "direction", "pred": int(pd.argmax())})
+        self.input_scale_xy = self._input_scale(view, data, int(model.config.image_size))
         return rows
 
 

@@ -63,8 +63,14 @@ def test_delta_input_and_input_modes() -> None:
     x = torch.rand(2, 4, 3, 8, 8)
     small = {"config": "small", "modality": "rgb", "depth_scale_mm": 1.0, "input": None,
              "delta_gain": 4.0}
-    assert input_mode(small) == "delta" and input_mode({**small, "config": "paper"}) == "frames"
+    assert input_mode(small) == "frames+delta"
+    assert input_mode({**small, "config": "paper"}) == "frames+delta"
+    both = _normalize(x, small)
+    assert both.shape == (2, 4, 6, 8, 8)
+    assert torch.equal(both[:, :, :3], (x - 0.5) / 0.5)
+    small["input"] = "delta"
     d = _normalize(x, small)
+    assert torch.equal(both[:, :, 3:], d)
     assert torch.equal(d[:, 0], torch.zeros_like(d[:, 0]))  # the first frame minus itself
     assert torch.allclose(d, ((x - x[:, :1]) * 8).clamp(-1, 1), atol=1e-6)
     assert torch.equal(_normalize(x, {**small, "input": "frames"}), (x - 0.5) / 0.5)

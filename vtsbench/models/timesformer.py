@@ -70,8 +70,10 @@ def backbone_config(
     image_size: int | None = None,
     num_frames: int | None = None,
     dropout: float = 0.0,
+    with_delta: bool = False,
 ):
-    """The ``TimesformerConfig`` of a named configuration for a modality."""
+    """The ``TimesformerConfig`` of a named configuration for a modality; ``with_delta`` doubles
+    the input channels (each frame followed by its difference to the sequence's first)."""
     from transformers import TimesformerConfig
 
     if name not in CONFIGS:
@@ -80,7 +82,7 @@ def backbone_config(
     return TimesformerConfig(
         image_size=image_size or s.image_size,
         patch_size=s.patch_size,
-        num_channels=channels_of(modality),
+        num_channels=channels_of(modality) * (2 if with_delta else 1),
         num_frames=num_frames or s.num_frames,
         hidden_size=s.hidden_size,
         num_hidden_layers=s.num_hidden_layers,
@@ -108,6 +110,11 @@ def adapt_patch_weight(weight: torch.Tensor, channels: int) -> torch.Tensor:
         return mean
     if channels == 4:
         return torch.cat([weight, mean], dim=1)
+    if channels in (2, 6, 8):
+        # frames and their differences: the frame filters as above, the difference filters 0,
+        # so the pretrained model starts out seeing the frames alone
+        base = adapt_patch_weight(weight, channels // 2)
+        return torch.cat([base, torch.zeros_like(base)], dim=1)
     raise ValueError(f"cannot adapt 3 input channels to {channels}")
 
 
@@ -204,6 +211,7 @@ class DualHeadTimesformer(nn.Module):
         num_frames: int | None = None,
         dropout: float = 0.0,
         cache_dir: str | Path | None = None,
+        with_delta: bool = False,
     ) -> DualHeadTimesformer:
         """Build a named configuration (``paper`` or ``small``) for a modality.
 
@@ -211,9 +219,11 @@ class DualHeadTimesformer(nn.Module):
         local Hugging Face cache; ``PretrainedWeightsMissing`` with a one-line message when
         absent) and to False for ``small`` unless ``pretrained_path`` is given.
         ``image_size`` and ``num_frames`` override the configuration's (tests use 32x32).
+        ``with_delta``: twice the modality's channels, frames and their differences.
         """
         config = backbone_config(
-            name, modality, image_size=image_size, num_frames=num_frames, dropout=dropout
+            name, modality, image_size=image_size, num_frames=num_frames, dropout=dropout,
+            with_delta=with_delta,
         )
         if pretrained is None:
             pretrained = CONFIGS[name].pretrained or pretrained_path is not None
@@ -303,3 +313,30 @@ def parameter_counts(modality: str = "rgb") -> dict[str, dict[str, int]]:
             "total": count_parameters(model),
         }
     return out
+
+
+def dihedral_augment(x: torch.Tensor, direction: torch.Tensor, generator: torch.Generator
+                     ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Rotate each square sequence of ``x`` (B, T, C, S, S) by a random multiple of 90 degrees
+    after a random left-right mirror (the 8 symmetries of the square, draws from
+    ``generator``) and map its direction label to match: a mirror maps k -> (4 - k) mod 8, a
+    quarter turn counter-clockwise k -> k + 2. Exact only on isotropic square crops (the
+    contact crop of the TimeSformer recipe); labels < 0 (no direction) stay."""
+    from vtsbench.labels import MIRROR_X
+
+    if x.shape[-1] != x.shape[-2]:
+        raise ValueError(f"quarter turns need square frames, got {tuple(x.shape[-2:])}")
+    b = x.shape[0]
+    mirror = torch.rand(b, generator=generator) < 0.5
+    turns = torch.randint(0, 4, (b,), generator=generator)
+    d = direction.long().clone()
+    out = []
+    mx = torch.tensor(MIRROR_X)
+    for i in range(b):
+        xi = x[i].flip(-1) if bool(mirror[i]) else x[i]
+        # rot90 from the rows axis towards the columns axis turns the picture counter-clockwise
+        out.append(torch.rot90(xi, int(turns[i]), dims=(-2, -1)))
+        if d[i] >= 0:
+            k = int(mx[d[i]]) if bool(mirror[i]) else int(d[i])
+            d[i] = (k + 2 * int(turns[i])) % NUM_DIRECTIONS
+    return torch.stack(out), d

@@ -1,0 +1,80 @@
+"""Square crops of a sequence around where the gel is touched, for models that need the
+resolution where the contact is (the slip TimeSformer recipe).
+
+The centre comes from the sequence itself, never from a label: the union of its contact masks
+(a dataset built with depth), else where the frames change most against the first one, else the
+frame's centre. The crop is `crop_px` sensor pixels on a side (shifted inside the frame), resized
+to `size`: an isotropic square, so quarter turns of it keep slip-direction labels exact.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+#: Grey levels of (blurred) change against the first frame below which a pixel counts as still.
+MOTION_LEVEL = 4.0
+
+
+def crop_center(rgb: np.ndarray, contact: np.ndarray | None = None) -> tuple[float, float]:
+    """(x, y) in pixels of the crop centre of a (T, H, W, 3) uint8 sequence."""
+    import cv2
+
+    h, w = rgb.shape[1:3]
+    if contact is not None:
+        m = np.asarray(contact).any(axis=0)
+        if m.any():
+            ys, xs = np.nonzero(m)
+            return float(xs.mean()), float(ys.mean())
+    if len(rgb) < 2:
+        return (w - 1) / 2.0, (h - 1) / 2.0
+    g = rgb.mean(axis=-1, dtype=np.float32)
+    energy = cv2.GaussianBlur(np.abs(g[1:] - g[:1]).max(axis=0), (0, 0), 3.0)
+    energy[energy < MOTION_LEVEL] = 0.0
+    total = float(energy.sum())
+    if total <= 0.0:
+        return (w - 1) / 2.0, (h - 1) / 2.0
+    ys, xs = np.mgrid[0:h, 0:w]
+    return float((xs * energy).sum() / total), float((ys * energy).sum() / total)
+
+
+def crop_box(center: tuple[float, float], crop_px: int, shape: tuple[int, int]
+             ) -> tuple[int, int, int]:
+    """(x0, y0, side) of a square of side min(crop_px, H, W) around center, inside the frame."""
+    h, w = shape
+    side = int(min(crop_px, h, w))
+    x0 = int(round(center[0] - side / 2))
+    y0 = int(round(center[1] - side / 2))
+    return min(max(x0, 0), w - side), min(max(y0, 0), h - side), side
+
+
+def crop_sequence(frames: np.ndarray, box: tuple[int, int, int], size: int) -> np.ndarray:
+    """(T, H, W[, C]) frames cut to box and resized (area) to size x size; dtype kept."""
+    import cv2
+
+    x0, y0, side = box
+    out = []
+    for f in frames:
+        c = np.ascontiguousarray(f[y0:y0 + side, x0:x0 + side])
+        out.append(cv2.resize(c, (size, size), interpolation=cv2.INTER_AREA)
+                   if side != size else c)
+    return np.stack(out)
+
+
+def contact_crop(sample: dict[str, Any], crop_px: int, size: int, modality: str
+                 ) -> tuple[np.ndarray, tuple[float, float]]:
+    """A sample's sequence cut around its contact: (T, C, size, size) float32 (rgb in [0, 1],
+    then depth in mm for rgbd; depth alone for depth) and the model-input pixels per sensor
+    pixel (x, y)."""
+    rgb = sample["rgb"]
+    box = crop_box(crop_center(rgb, sample.get("contact")), crop_px, rgb.shape[1:3])
+    parts = []
+    if modality in ("rgb", "rgbd"):
+        parts.append(crop_sequence(rgb, box, size).astype(np.float32).transpose(0, 3, 1, 2)
+                     / 255.0)
+    if modality in ("depth", "rgbd"):
+        d = crop_sequence(np.asarray(sample["depth"], dtype=np.float32), box, size)
+        parts.append(d[:, None])
+    scale = size / box[2]
+    return np.concatenate(parts, axis=1), (scale, scale)
