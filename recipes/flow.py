@@ -6,10 +6,11 @@ flow vector), coherence (net translation over mean magnitude), divergence (press
 outwards), their time profile (first half against second half of the sequence), and the length
 and peak of the global shift. Direction comes from the global shift (`direction: phase`): phase
 correlation of the first frame with every later one, windowed to where the gel moves
-(`motion_window`), the slope of the shifts over the whole sequence; angle = atan2(-dy (rows point down), dx), binned with
-`vtsbench.labels.angle_to_class`. The mean DIS flow vector of the whole frame (`mean_flow`, the
-earlier rule) is diluted by the still gel and pulled by the press's outward spread. The checkpoint holds the fitted tree as arrays in safetensors
-(no pickle) and the config as JSON metadata.
+(`motion_window`), the slope of the shifts over the whole sequence; angle = atan2(-dy (rows
+point down), dx), binned with `vtsbench.labels.angle_to_class`. The mean DIS flow vector of the
+whole frame (`mean_flow`, the earlier rule) is diluted by the still gel and pulled by the
+press's outward spread. The checkpoint holds the fitted tree as arrays in safetensors (no
+pickle) and the config as JSON metadata.
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from vtsbench.errors import VtsError
-from vtsbench.recipes import Recipe, progress_iter
+from vtsbench.recipes import Recipe, fit_view, progress_iter
 
 MODALITIES = ("rgb", "depth")
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
@@ -97,6 +97,7 @@ class ResnetRecipe(Recipe):
             "modality": "rgb",          # rgb | depth
             "image_size": 224,          # square input side
             "pretrained_path": None,    # torchvision ImageNet state dict (.pth/.safetensors)
+            "fit_parts": ["train"],     # parts of the split trained on (never test)
             "augment": True,
             "jitter": 0.3,
             "max_rotation": 180.0,      # any rotation: a static imprint's class does not
@@ -115,6 +116,10 @@ class ResnetRecipe(Recipe):
             "checkpoint_every": 50,
             "amp": True,
             "gradcam": 0,               # write Grad-CAM overlays of the first N test samples
+            "threads": 1,               # torch CPU threads, pinned: the same figures on any
+                                        # machine (null: torch's default); one per process:
+                                        # two OpenMP threads on a busy 2-core machine made a
+                                        # step 25x slower (17-21 s against 0.6-1.1 s)
         }
 
     @staticmethod
@@ -141,9 +146,10 @@ class ResnetRecipe(Recipe):
         from vtsbench.training import TrainConfig, seed_everything, train_loop
 
         ds = vtsbench.load(dataset_path)
-        view = ds.split(split, "train")
+        parts = config.get("fit_parts") or ["train"]
+        view = fit_view(dataset_path, split, parts)
         if len(view) == 0:
-            raise VtsError(f"no samples in {split}/train")
+            raise VtsError(f"no samples in {split}/{'+'.join(parts)}")
         seed_everything(seed)  # the classifier's random init depends on the seed
         objects = list(ds.info.objects)
         model = self._model(config, len(objects), config["pretrained_path"])
@@ -186,6 +192,9 @@ class ResnetRecipe(Recipe):
         model = self._model(config, len(objects), None)
         load_checkpoint(checkpoint, model)
         dev = resolve_device(device)
+        from vtsbench.environment import deterministic
+
+        deterministic(config.get("threads"))
         model.to(dev).eval()
         return model, config, dev
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from vtsbench.errors import VtsError
 from vtsbench.labels import STATES
-from vtsbench.recipes import Recipe, progress_iter
+from vtsbench.recipes import Recipe, fit_view, progress_iter
 
 MODALITIES = ("rgb", "depth", "rgbd")
 
@@ -38,15 +38,25 @@ def _frames(x: Any, modality: str, depth_scale_mm: float) -> Any:
     return out
 
 
-INPUTS = ("frames", "delta", "frames+delta")
+INPUTS = ("frames", "delta", "frames+delta", "frames+flow", "frames+delta+flow")
 
 
 def input_mode(config: dict[str, Any]) -> str:
-    """`input` of a config; null: `frames+delta` (each frame and its difference to the first)."""
-    mode = config.get("input") or "frames+delta"
+    """`input` of a config; null: `frames+delta+flow` on contact crops, else `frames+delta` (each
+    frame and its difference to the first).
+    The `+flow` modes add two channels of optical flow from the first frame (contact crops
+    only, `crop_px`)."""
+    mode = config.get("input") or ("frames+delta+flow" if config.get("crop_px") else
+                                   "frames+delta")
     if mode not in INPUTS:
         raise VtsError(f"input must be one of {', '.join(INPUTS)}, not {mode!r}")
+    if mode.endswith("+flow") and not config.get("crop_px"):
+        raise VtsError(f"input {mode!r} needs crop_px (the flow is computed on the crop)")
     return mode
+
+
+def uses_flow(config: dict[str, Any]) -> bool:
+    return input_mode(config).endswith("+flow")
 
 
 def _normalize(x: Any, config: dict[str, Any]) -> Any:
@@ -58,12 +68,17 @@ def _normalize(x: Any, config: dict[str, Any]) -> Any:
     texture is the same pattern for +d and a shifted -d): on the demo's benchmark the `delta`
     input left the direction head at chance (13.5 % unseen objects, 25.9 % seen), while the
     state head learnt (96.4 %). The frame beside its difference resolves the sign."""
-    x = _frames(x, config["modality"], float(config["depth_scale_mm"]))
     mode = input_mode(config)
-    if mode == "frames":
-        return x
-    delta = ((x - x[:, :1]) * float(config.get("delta_gain", 4.0))).clamp(-1.0, 1.0)
-    return delta if mode == "delta" else torch_cat((x, delta), dim=2)
+    flow = None
+    if mode.endswith("+flow"):  # the last two channels: flow, already scaled (crop_flow)
+        x, flow = x[:, :, :-2], x[:, :, -2:]
+    x = _frames(x, config["modality"], float(config["depth_scale_mm"]))
+    parts = [] if mode == "delta" else [x]
+    if "delta" in mode:
+        parts.append(((x - x[:, :1]) * float(config.get("delta_gain", 4.0))).clamp(-1.0, 1.0))
+    if flow is not None:
+        parts.append(flow)
+    return parts[0] if len(parts) == 1 else torch_cat(parts, dim=2)
 
 
 def torch_cat(parts: Any, dim: int) -> Any:
@@ -83,7 +98,7 @@ class CropData:
         self.view, self.config, self.size = view, config, size
         self.frames = frames
         self.frame_numbers = frame_numbers
-        chans = {"rgb": 3, "depth": 1, "rgbd": 4}[config["modality"]]
+        chans = {"rgb": 3, "depth": 1, "rgbd": 4}[config["modality"]] + 2 * uses_flow(config)
         need = len(view) * frames * chans * size * size * 4 / 2**20
         self.cache: dict[int, Any] | None = {} if need <= cache_mb else None
         self.scale: tuple[float, float] | None = None
@@ -100,7 +115,7 @@ class CropData:
             return self.cache[i]
         s = self.view[i]
         x, self.scale = contact_crop(s, int(self.config["crop_px"]), self.size,
-                                     self.config["modality"])
+                                     self.config["modality"], flow=uses_flow(self.config))
         x = x[self.frame_numbers(len(x), self.frames)]
         state = -1 if s.get("state_idx") is None else int(s["state_idx"])
         direction = -1 if s.get("direction") is None else int(s["direction"])
@@ -129,12 +144,16 @@ class TimesformerRecipe(Recipe):
             "image_size": None,         # None: the config's (small 112, paper 224)
             "num_frames": None,         # None: the config's (8)
             "pretrained_path": None,    # folder with the paper's weights (paper: HF cache too)
+            "pretrained": None,         # None: paper loads its weights, small does not;
+                                        # false: random init (paper-size, no weights on disk)
             "lambda_dir": 1.0,          # weight of the direction term of the masked loss
             "flip": True,               # mirror sequences (labels mapped) while training;
                                         # with crop_px also quarter turns (8 symmetries)
             "slip_oversample": 3,       # draw slipping training sequences this many times
+            "fit_parts": ["train"],     # parts of the split trained on (never test)
             "input": None,              # frames | delta (each frame minus the first) |
-                                        # frames+delta (both; None: frames+delta)
+                                        # frames+delta | frames+flow | frames+delta+flow
+                                        # (None: frames+delta+flow with crop_px)
             "delta_gain": 4.0,          # delta input: gain before clipping to [-1, 1]
             "crop_px": 320,             # square of this many sensor px around the contact,
                                         # resized to image_size; None: the whole frame
@@ -149,6 +168,10 @@ class TimesformerRecipe(Recipe):
             "depth_scale_mm": 1.0,
             "checkpoint_every": 50,
             "amp": True,
+            "threads": 1,               # torch CPU threads, pinned: the same figures on any
+                                        # machine (null: torch's default); one per process:
+                                        # two OpenMP threads on a busy 2-core machine made a
+                                        # step 25x slower (17-21 s against 0.6-1.1 s)
         }
 
     # -- model and data -------------------------------------------------------------------
@@ -171,7 +194,8 @@ class TimesformerRecipe(Recipe):
             config["config"], config["modality"], config["pretrained_path"],
             pretrained=pretrained, image_size=config["image_size"],
             num_frames=config["num_frames"], dropout=float(config["dropout"]),
-            with_delta=input_mode(config) == "frames+delta")
+            with_delta="frames+delta" in input_mode(config),
+            extra_channels=2 if uses_flow(config) else 0)
 
     @staticmethod
     def _view_torch(view: Any, model: Any, config: dict[str, Any]) -> Any:
@@ -197,13 +221,11 @@ class TimesformerRecipe(Recipe):
         import torch
         from torch.utils.data import Subset
 
-        import vtsbench
-        from vtsbench.models.timesformer import (dihedral_augment, flip_augment,
-                                                 masked_joint_loss)
+        from vtsbench.models.timesformer import dihedral_augment, flip_augment, masked_joint_loss
         from vtsbench.training import TrainConfig, seed_everything, train_loop
 
         self._check(config)
-        view = vtsbench.load(dataset_path).split(split, "train")
+        view = fit_view(dataset_path, split, config.get("fit_parts") or ["train"])
         states = view.index["state_idx"].to_pylist() if "state_idx" in \
             view.index.column_names else []
         keep = [i for i, s in enumerate(states) if s is not None]
@@ -215,7 +237,7 @@ class TimesformerRecipe(Recipe):
         slip = STATES.index("slip")
         keep += [i for i in keep if states[i] == slip] * (int(config["slip_oversample"]) - 1)
         seed_everything(seed)  # the heads' random init depends on the seed
-        model = self._model(config, pretrained=None)
+        model = self._model(config, pretrained=config.get("pretrained"))
         data = Subset(self._view_torch(view, model, config), keep)
         lam = float(config["lambda_dir"])
 
@@ -257,6 +279,9 @@ class TimesformerRecipe(Recipe):
         model = self._model(config, pretrained=False)
         load_checkpoint(checkpoint, model)
         dev = resolve_device(device)
+        from vtsbench.environment import deterministic
+
+        deterministic(config.get("threads"))
         model.to(dev).eval()
         view = vtsbench.load(dataset_path).split(split, part)
         data = self._view_torch(view, model, config)

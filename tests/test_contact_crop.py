@@ -51,7 +51,7 @@ def test_contact_crop_shapes_and_scale() -> None:
     depth = np.zeros(seq.shape[:3], np.float32)
     x, scale = contact_crop({"rgb": seq, "depth": depth}, 40, 20, "rgbd")
     assert x.shape == (4, 4, 20, 20) and x.dtype == np.float32 and scale == (0.5, 0.5)
-    assert 0.0 <= x[:, :3].min() and x[:, :3].max() <= 1.0
+    assert x[:, :3].min() >= 0.0 and x[:, :3].max() <= 1.0
     d, _ = contact_crop({"rgb": seq, "depth": depth}, 40, 20, "depth")
     assert d.shape == (4, 1, 20, 20)
 

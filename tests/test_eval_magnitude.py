@@ -9,13 +9,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_eval_cli import slip_split, write_submission
 from typer.testing import CliRunner
 
-from test_eval_cli import slip_split, write_submission
 from vtsbench.cli import app
 from vtsbench.dataset.schema import SCHEMA_DIR
-from vtsbench.evaluation.magnitude import (MAGNITUDE_EDGES_MM, by_magnitude, distances,
-                                           per_state, slip_motion)
+from vtsbench.evaluation.magnitude import (
+    MAGNITUDE_EDGES_MM,
+    by_magnitude,
+    distances,
+    per_state,
+    slip_motion,
+)
 from vtsbench.evaluation.submission import load_truth
 
 pytest_plugins = ["loader_conftest"]

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
@@ -69,7 +70,7 @@ def by_magnitude(correct: Any, mm: Any, px: Any,
         raise ValueError("bin edges must be at least two increasing numbers")
     known = np.isfinite(mm)
     bins = []
-    for lo, hi in zip(e[:-1], e[1:], strict=True):
+    for lo, hi in pairwise(e):
         m = known & (mm >= lo) & (mm < hi)
         n = int(m.sum())
         p = px[m][np.isfinite(px[m])]

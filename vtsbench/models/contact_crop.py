@@ -44,8 +44,8 @@ def crop_box(center: tuple[float, float], crop_px: int, shape: tuple[int, int]
     """(x0, y0, side) of a square of side min(crop_px, H, W) around center, inside the frame."""
     h, w = shape
     side = int(min(crop_px, h, w))
-    x0 = int(round(center[0] - side / 2))
-    y0 = int(round(center[1] - side / 2))
+    x0 = round(center[0] - side / 2)
+    y0 = round(center[1] - side / 2)
     return min(max(x0, 0), w - side), min(max(y0, 0), h - side), side
 
 
@@ -62,10 +62,31 @@ def crop_sequence(frames: np.ndarray, box: tuple[int, int, int], size: int) -> n
     return np.stack(out)
 
 
-def contact_crop(sample: dict[str, Any], crop_px: int, size: int, modality: str
-                 ) -> tuple[np.ndarray, tuple[float, float]]:
+#: Flow channels are in pixels at the model's input divided by this, then clipped to [-1, 1].
+FLOW_SCALE_PX = 4.0
+
+
+def crop_flow(grey: np.ndarray, size: int) -> np.ndarray:
+    """(T, 2, size, size) float32: DIS optical flow (OpenCV, `medium` preset) from the first
+    frame to each frame of a (T, S, S) uint8 crop, resized to size and expressed in pixels at
+    that size over FLOW_SCALE_PX, clipped to [-1, 1] (x right, y down the rows). Frame 0: 0."""
+    import cv2
+
+    dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+    side = grey.shape[-1]
+    out = np.zeros((len(grey), 2, size, size), np.float32)
+    for t in range(1, len(grey)):
+        f = dis.calc(grey[0], grey[t], None)
+        f = cv2.resize(f, (size, size), interpolation=cv2.INTER_AREA) * (size / side)
+        out[t] = np.clip(f.transpose(2, 0, 1) / FLOW_SCALE_PX, -1.0, 1.0)
+    return out
+
+
+def contact_crop(sample: dict[str, Any], crop_px: int, size: int, modality: str,
+                 flow: bool = False) -> tuple[np.ndarray, tuple[float, float]]:
     """A sample's sequence cut around its contact: (T, C, size, size) float32 (rgb in [0, 1],
-    then depth in mm for rgbd; depth alone for depth) and the model-input pixels per sensor
+    then depth in mm for rgbd; depth alone for depth; with `flow`, two more channels: the
+    optical flow from the first frame, `crop_flow`) and the model-input pixels per sensor
     pixel (x, y)."""
     rgb = sample["rgb"]
     box = crop_box(crop_center(rgb, sample.get("contact")), crop_px, rgb.shape[1:3])
@@ -76,5 +97,15 @@ def contact_crop(sample: dict[str, Any], crop_px: int, size: int, modality: str
     if modality in ("depth", "rgbd"):
         d = crop_sequence(np.asarray(sample["depth"], dtype=np.float32), box, size)
         parts.append(d[:, None])
+    if flow:
+        import cv2
+
+        if modality == "depth":  # the depth maps as grey levels (0 to the deepest point)
+            d = crop_sequence(np.asarray(sample["depth"], dtype=np.float32), box, box[2])
+            grey = np.clip(255 * d / max(float(d.max()), 1e-6), 0, 255).astype(np.uint8)
+        else:
+            grey = np.stack([cv2.cvtColor(f, cv2.COLOR_RGB2GRAY)
+                             for f in crop_sequence(rgb, box, box[2])])
+        parts.append(crop_flow(grey, size))
     scale = size / box[2]
     return np.concatenate(parts, axis=1), (scale, scale)

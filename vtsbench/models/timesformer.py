@@ -71,9 +71,11 @@ def backbone_config(
     num_frames: int | None = None,
     dropout: float = 0.0,
     with_delta: bool = False,
+    extra_channels: int = 0,
 ):
     """The ``TimesformerConfig`` of a named configuration for a modality; ``with_delta`` doubles
-    the input channels (each frame followed by its difference to the sequence's first)."""
+    the input channels (each frame followed by its difference to the sequence's first);
+    ``extra_channels`` adds more (e.g. 2 of optical flow)."""
     from transformers import TimesformerConfig
 
     if name not in CONFIGS:
@@ -82,7 +84,7 @@ def backbone_config(
     return TimesformerConfig(
         image_size=image_size or s.image_size,
         patch_size=s.patch_size,
-        num_channels=channels_of(modality) * (2 if with_delta else 1),
+        num_channels=channels_of(modality) * (2 if with_delta else 1) + extra_channels,
         num_frames=num_frames or s.num_frames,
         hidden_size=s.hidden_size,
         num_hidden_layers=s.num_hidden_layers,
@@ -91,10 +93,11 @@ def backbone_config(
         hidden_dropout_prob=dropout,
         attention_probs_dropout_prob=dropout,
         attention_type="divided_space_time",
+        vts_extra_channels=extra_channels,
     )
 
 
-def adapt_patch_weight(weight: torch.Tensor, channels: int) -> torch.Tensor:
+def adapt_patch_weight(weight: torch.Tensor, channels: int, extra: int = 0) -> torch.Tensor:
     """Adapt a 3-channel patch-embedding (or conv) weight ``(O, 3, k, k)`` to ``channels``.
 
     - 3: unchanged.
@@ -103,6 +106,9 @@ def adapt_patch_weight(weight: torch.Tensor, channels: int) -> torch.Tensor:
     """
     if weight.shape[1] != 3:
         raise ValueError(f"expected a 3-channel weight, got {tuple(weight.shape)}")
+    if extra:  # channels after the frames' (optical flow): their filters start at zero
+        base = adapt_patch_weight(weight, channels - extra)
+        return torch.cat([base, base.new_zeros(base.shape[0], extra, *base.shape[2:])], dim=1)
     mean = weight.mean(dim=1, keepdim=True)
     if channels == 3:
         return weight.clone()
@@ -148,7 +154,8 @@ def load_pretrained_backbone(config, source: str | Path | None = None, cache_dir
         ) from None
     state = src.state_dict()
     key = "embeddings.patch_embeddings.projection.weight"
-    state[key] = adapt_patch_weight(state[key], config.num_channels)
+    state[key] = adapt_patch_weight(state[key], config.num_channels,
+                                    int(getattr(config, "vts_extra_channels", 0)))
     model = TimesformerModel(config)
     own = model.state_dict()
     for k in ("embeddings.position_embeddings", "embeddings.time_embeddings"):
@@ -212,6 +219,7 @@ class DualHeadTimesformer(nn.Module):
         dropout: float = 0.0,
         cache_dir: str | Path | None = None,
         with_delta: bool = False,
+        extra_channels: int = 0,
     ) -> DualHeadTimesformer:
         """Build a named configuration (``paper`` or ``small``) for a modality.
 
@@ -219,11 +227,12 @@ class DualHeadTimesformer(nn.Module):
         local Hugging Face cache; ``PretrainedWeightsMissing`` with a one-line message when
         absent) and to False for ``small`` unless ``pretrained_path`` is given.
         ``image_size`` and ``num_frames`` override the configuration's (tests use 32x32).
-        ``with_delta``: twice the modality's channels, frames and their differences.
+        ``with_delta``: twice the modality's channels, frames and their differences;
+        ``extra_channels``: more input channels after those (2 for optical flow).
         """
         config = backbone_config(
             name, modality, image_size=image_size, num_frames=num_frames, dropout=dropout,
-            with_delta=with_delta,
+            with_delta=with_delta, extra_channels=extra_channels,
         )
         if pretrained is None:
             pretrained = CONFIGS[name].pretrained or pretrained_path is not None
