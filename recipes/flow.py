@@ -80,6 +80,17 @@ def motion_window(gray: list[np.ndarray], level: float = 4.0, sigma: float = 3.0
     return (mask * cv2.createHanningWindow((w, h), cv2.CV_32F)).astype(np.float32)
 
 
+#: The global shift is measured on frames no smaller than this (shorter side, px): phase
+#: correlation of a small frame shrunk further has too few pixels to find the peak.
+MIN_SHIFT_SIDE = 240
+
+
+def shift_scale(shape: tuple[int, int], scale: float) -> float:
+    """The resize factor the global shift uses: `scale`, raised so that the shorter side keeps
+    MIN_SHIFT_SIDE pixels, and never above 1."""
+    return float(min(1.0, max(scale, MIN_SHIFT_SIDE / max(1, min(shape)))))
+
+
 def global_shift(frames: np.ndarray, scale: float = 0.5) -> tuple[float, float, float]:
     """Displacement of the moving gel over a (T, H, W, 3) sequence: phase correlation of the
     first frame with every later one inside `motion_window`, and the least-squares slope of
@@ -93,6 +104,7 @@ def global_shift(frames: np.ndarray, scale: float = 0.5) -> tuple[float, float, 
     94.6 / 96.3 %."""
     import cv2
 
+    scale = shift_scale(frames.shape[1:3], scale)
     g = [x.astype(np.float32) for x in _gray(frames, scale)]
     win = motion_window(g)
     if win is None or len(g) < 2:
@@ -254,7 +266,8 @@ class FlowRecipe(Recipe):
             rows.append({"sample_id": s["sample_id"], "task": "state", "pred": STATES[state]})
             rows.append({"sample_id": s["sample_id"], "task": "direction", "pred": direction})
         assert all(0 <= r["pred"] < N_DIRECTIONS for r in rows if r["task"] == "direction")
-        shift = float(config.get("shift_scale", 0.5))
+        h, w = vtsbench.load(dataset_path).info.resolution
+        shift = shift_scale((h, w), float(config.get("shift_scale", 0.5)))
         self.input_scale_xy = (shift, shift)
         return rows
 

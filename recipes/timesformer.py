@@ -249,8 +249,12 @@ class TimesformerRecipe(Recipe):
                 g = torch.Generator().manual_seed(int(torch.randint(0, 2**62, (1,))))
                 # square contact crops allow quarter turns too; resized whole frames mirrors
                 # only (see flip_augment)
-                aug = dihedral_augment if config.get("crop_px") else flip_augment
-                x, direction = aug(x, direction, g)
+                if config.get("crop_px"):  # flow channels (the last two) turn with the frames
+                    c = x.shape[2]
+                    x, direction = dihedral_augment(x, direction, g, (c - 2, c - 1)
+                                                    if uses_flow(config) else None)
+                else:
+                    x, direction = flip_augment(x, direction, g)
             x = _normalize(x.to(dev), config)
             state_logits, dir_logits = net(x)
             return masked_joint_loss(state_logits, dir_logits, target["state_idx"].to(dev),

@@ -80,3 +80,62 @@ def test_dihedral_labels_follow_the_frames(dx: float, dy_rows: float) -> None:
     assert (none == -1).all()
     with pytest.raises(ValueError, match="square"):
         dihedral_augment(torch.zeros(1, 2, 3, 4, 5), torch.zeros(1), torch.Generator())
+
+
+def test_crop_flow_follows_the_motion() -> None:
+    import cv2
+
+    from vtsbench.models.contact_crop import FLOW_SCALE_PX, crop_flow
+
+    seq = moving_blob(6, -3, h=64, w=64, at=(30, 34))
+    grey = np.stack([cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for f in seq])
+    f = crop_flow(grey, 32)
+    assert f.shape == (4, 2, 32, 32) and not f[0].any()
+    # 6 px right and 3 px up the rows over the sequence: the strongest flow points that way
+    # (26.6 degrees, class 1) and is at most 3 px long at half size
+    mag = np.hypot(f[-1, 0], f[-1, 1])
+    fx, fy = f[-1, 0][mag > 0.5 * mag.max()].mean(), f[-1, 1][mag > 0.5 * mag.max()].mean()
+    assert angle_to_class(math.degrees(math.atan2(-fy, fx)) % 360) == 1
+    assert 0.5 < mag.max() * FLOW_SCALE_PX < 4.0
+    x, _ = contact_crop({"rgb": seq}, 40, 20, "rgb", flow=True)
+    assert x.shape == (4, 5, 20, 20)
+
+
+def test_pretrained_filters_of_extra_channels_start_at_zero() -> None:
+    from vtsbench.models.timesformer import adapt_patch_weight
+
+    w = torch.randn(4, 3, 2, 2)
+    a = adapt_patch_weight(w, 8, extra=2)
+    assert a.shape == (4, 8, 2, 2)
+    assert torch.equal(a[:, :3], w) and not a[:, 3:].any()
+    d = adapt_patch_weight(w, 3, extra=2)
+    assert torch.allclose(d[:, :1], w.mean(1, keepdim=True)) and not d[:, 1:].any()
+
+
+def test_dihedral_turns_flow_vectors_with_the_frames() -> None:
+    import cv2
+
+    from vtsbench.models.contact_crop import crop_flow
+
+    def flow_dir(frames: torch.Tensor) -> int:
+        grey = (frames.mean(1).numpy() * 255).astype(np.uint8)
+        f = crop_flow(grey, grey.shape[-1])[-1]
+        return _vec_dir(torch.from_numpy(f))
+
+    def _vec_dir(f: torch.Tensor) -> int:
+        mag = torch.hypot(f[0], f[1])
+        sel = mag > 0.5 * mag.max()
+        fx, fy = float(f[0][sel].mean()), float(f[1][sel].mean())
+        return angle_to_class(math.degrees(math.atan2(-fy, fx)) % 360)
+
+    seq = moving_blob(5, -2, h=48, w=48, at=(24, 24))
+    frames = torch.from_numpy(seq.transpose(0, 3, 1, 2).astype(np.float32) / 255)
+    grey = np.stack([cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for f in seq])
+    x = torch.cat([frames, torch.from_numpy(crop_flow(grey, 48))], dim=1)
+    label = _vec_dir(x[-1, 3:])
+    assert label == flow_dir(frames)
+    out, d = dihedral_augment(x[None].repeat(12, 1, 1, 1, 1), torch.full((12,), label),
+                              torch.Generator().manual_seed(3), vector=(3, 4))
+    assert len(set(d.tolist())) > 3
+    for xi, di in zip(out, d, strict=True):
+        assert _vec_dir(xi[-1, 3:]) == int(di) == flow_dir(xi[:, :3])

@@ -76,6 +76,15 @@ def test_delta_input_and_input_modes() -> None:
     assert torch.equal(_normalize(x, {**small, "input": "frames"}), (x - 0.5) / 0.5)
     with pytest.raises(VtsError, match="input"):
         input_mode({**small, "input": "optical"})
+    with pytest.raises(VtsError, match="crop_px"):
+        input_mode({**small, "input": "frames+flow", "crop_px": None})
+    crop = {**small, "input": None, "crop_px": 16}
+    assert input_mode(crop) == "frames+delta+flow"
+    x5 = torch.rand(2, 4, 5, 8, 8)
+    out = _normalize(x5, crop)
+    assert out.shape == (2, 4, 8, 8, 8)
+    assert torch.equal(out[:, :, 6:], x5[:, :, 3:]) and torch.equal(out[:, :, :3],
+                                                                    (x5[:, :, :3] - 0.5) / 0.5)
 
 
 def test_slip_oversample_must_be_positive(vts_dataset: Path, tmp_path: Path) -> None:

@@ -324,13 +324,15 @@ def parameter_counts(modality: str = "rgb") -> dict[str, dict[str, int]]:
     return out
 
 
-def dihedral_augment(x: torch.Tensor, direction: torch.Tensor, generator: torch.Generator
-                     ) -> tuple[torch.Tensor, torch.Tensor]:
+def dihedral_augment(x: torch.Tensor, direction: torch.Tensor, generator: torch.Generator,
+                     vector: tuple[int, int] | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """Rotate each square sequence of ``x`` (B, T, C, S, S) by a random multiple of 90 degrees
     after a random left-right mirror (the 8 symmetries of the square, draws from
     ``generator``) and map its direction label to match: a mirror maps k -> (4 - k) mod 8, a
     quarter turn counter-clockwise k -> k + 2. Exact only on isotropic square crops (the
-    contact crop of the TimeSformer recipe); labels < 0 (no direction) stay."""
+    contact crop of the TimeSformer recipe); labels < 0 (no direction) stay. `vector`: the
+    channels holding a motion (x right, y down the rows; optical flow), whose values turn with
+    the frames: a mirror negates x, a quarter turn maps (x, y) to (y, -x)."""
     from vtsbench.labels import MIRROR_X
 
     if x.shape[-1] != x.shape[-2]:
@@ -344,7 +346,17 @@ def dihedral_augment(x: torch.Tensor, direction: torch.Tensor, generator: torch.
     for i in range(b):
         xi = x[i].flip(-1) if bool(mirror[i]) else x[i]
         # rot90 from the rows axis towards the columns axis turns the picture counter-clockwise
-        out.append(torch.rot90(xi, int(turns[i]), dims=(-2, -1)))
+        xi = torch.rot90(xi, int(turns[i]), dims=(-2, -1))
+        if vector is not None:
+            cx, cy = vector
+            vx, vy = xi[:, cx].clone(), xi[:, cy].clone()
+            if bool(mirror[i]):
+                vx = -vx
+            for _ in range(int(turns[i])):
+                vx, vy = vy, -vx
+            xi = xi.clone()
+            xi[:, cx], xi[:, cy] = vx, vy
+        out.append(xi)
         if d[i] >= 0:
             k = int(mx[d[i]]) if bool(mirror[i]) else int(d[i])
             d[i] = (k + 2 * int(turns[i])) % NUM_DIRECTIONS
