@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from vtsbench.errors import VtsError
+from vtsbench.models.contact_crop import CachedItems
 from vtsbench.recipes import Recipe, fit_view, progress_iter
 
 MODALITIES = ("rgb", "depth")
@@ -49,26 +50,19 @@ class _Normalized(torch.nn.Module):
         return self.net(_normalize(x, self.modality, self.depth_scale_mm))
 
 
-class StaticCrops:
+class StaticCrops(CachedItems):
     """A static split part as (x (C, S, S) float32, target) cut around each frame's contact
-    (`vtsbench.models.contact_crop`), kept in memory once cut when it fits in `cache_mb`:
-    the object's imprint at the resolution it has on the sensor, not shrunk with the frame."""
+    (`vtsbench.models.contact_crop`), kept in memory once cut when it fits: the object's
+    imprint at the resolution it has on the sensor, not shrunk with the frame."""
 
-    def __init__(self, view: Any, config: dict[str, Any], size: int,
-                 cache_mb: float = 2048.0) -> None:
-        self.view, self.config, self.size = view, config, size
+    def __init__(self, view: Any, config: dict[str, Any], size: int) -> None:
         chans = 1 if config["modality"] == "depth" else 3
-        need = len(view) * chans * size * size * 4 / 2**20
-        self.cache: dict[int, Any] | None = {} if need <= cache_mb else None
+        super().__init__(view, chans * size * size * 4)
+        self.config, self.size = config, size
 
-    def __len__(self) -> int:
-        return len(self.view)
-
-    def __getitem__(self, i: int) -> Any:
+    def make(self, i: int) -> Any:
         from vtsbench.models.contact_crop import contact_crop
 
-        if self.cache is not None and i in self.cache:
-            return self.cache[i]
         s = self.view[i]
         seq = {"rgb": s["rgb"][None],
                "contact": None if s.get("contact") is None else s["contact"][None]}
@@ -76,11 +70,8 @@ class StaticCrops:
             seq["depth"] = s["depth"][None]
         x, _ = contact_crop(seq, int(self.config["crop_px"]), self.size, self.config["modality"])
         cls = -1 if s.get("class_idx") is None else int(s["class_idx"])
-        item = (torch.from_numpy(np.ascontiguousarray(x[0])),
+        return (torch.from_numpy(np.ascontiguousarray(x[0])),
                 {"sample_id": s["sample_id"], "class_idx": torch.tensor(cls)})
-        if self.cache is not None:
-            self.cache[i] = item
-        return item
 
 
 class ResnetRecipe(Recipe):

@@ -6,8 +6,10 @@ global token, trained with the masked joint loss L = L_state + lambda * 1[state 
 through `vtsbench.training.train_loop` (seeded batches, safetensors checkpoints, exact resume,
 mixed precision on CUDA, DDP under torchrun). Configs: `small` (random init, trains on a CPU in
 minutes) and `paper` (base, 224x224, 8 frames, from `facebook/timesformer-base-finetuned-ssv2`
-on disk). Inputs: rgb, depth or rgbd. The checkpoint holds the weights and, in its metadata, the
-recipe's config, so `predict` rebuilds the same model.
+on disk). Inputs: rgb, depth or rgbd, cut around the contact (`crop_px`), each frame with its
+difference to the first and two channels of optical flow from the first frame (`input`), trained
+with the 8 label-mapped symmetries of the square crop. The checkpoint holds the weights and, in
+its metadata, the recipe's config, so `predict` rebuilds the same model.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 
 from vtsbench.errors import VtsError
 from vtsbench.labels import STATES
+from vtsbench.models.contact_crop import CachedItems
 from vtsbench.recipes import Recipe, fit_view, progress_iter
 
 MODALITIES = ("rgb", "depth", "rgbd")
@@ -87,44 +90,33 @@ def torch_cat(parts: Any, dim: int) -> Any:
     return torch.cat(parts, dim=dim)
 
 
-class CropData:
+class CropData(CachedItems):
     """A split part as (x (T, C, S, S) float32, target) cut around each sequence's contact
-    (`vtsbench.models.contact_crop`), held in memory once cut when it fits in `cache_mb`."""
+    (`vtsbench.models.contact_crop`), held in memory once cut when it fits."""
 
-    def __init__(self, view: Any, config: dict[str, Any], size: int, frames: int,
-                 cache_mb: float = 2048.0) -> None:
+    def __init__(self, view: Any, config: dict[str, Any], size: int, frames: int) -> None:
         from vtsbench.dataset.torch_dataset import frame_numbers
 
-        self.view, self.config, self.size = view, config, size
-        self.frames = frames
-        self.frame_numbers = frame_numbers
         chans = {"rgb": 3, "depth": 1, "rgbd": 4}[config["modality"]] + 2 * uses_flow(config)
-        need = len(view) * frames * chans * size * size * 4 / 2**20
-        self.cache: dict[int, Any] | None = {} if need <= cache_mb else None
+        super().__init__(view, frames * chans * size * size * 4)
+        self.config, self.size, self.frames = config, size, frames
+        self.frame_numbers = frame_numbers
         self.scale: tuple[float, float] | None = None
 
-    def __len__(self) -> int:
-        return len(self.view)
-
-    def __getitem__(self, i: int) -> Any:
+    def make(self, i: int) -> Any:
         import torch
 
         from vtsbench.models.contact_crop import contact_crop
 
-        if self.cache is not None and i in self.cache:
-            return self.cache[i]
         s = self.view[i]
         x, self.scale = contact_crop(s, int(self.config["crop_px"]), self.size,
                                      self.config["modality"], flow=uses_flow(self.config))
         x = x[self.frame_numbers(len(x), self.frames)]
         state = -1 if s.get("state_idx") is None else int(s["state_idx"])
         direction = -1 if s.get("direction") is None else int(s["direction"])
-        item = (torch.from_numpy(np.ascontiguousarray(x)),
+        return (torch.from_numpy(np.ascontiguousarray(x)),
                 {"sample_id": s["sample_id"], "state_idx": torch.tensor(state),
                  "direction": torch.tensor(direction)})
-        if self.cache is not None:
-            self.cache[i] = item
-        return item
 
 
 class TimesformerRecipe(Recipe):

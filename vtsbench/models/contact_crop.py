@@ -109,3 +109,27 @@ def contact_crop(sample: dict[str, Any], crop_px: int, size: int, modality: str,
         parts.append(crop_flow(grey, size))
     scale = size / box[2]
     return np.concatenate(parts, axis=1), (scale, scale)
+
+
+class CachedItems:
+    """A map-style dataset over a dataset view whose items (`make(i)`) are kept in memory once
+    made, when all of them together fit in `cache_mb` (`item_bytes` each)."""
+
+    def __init__(self, view: Any, item_bytes: float, cache_mb: float = 2048.0) -> None:
+        self.view = view
+        self.cache: dict[int, Any] | None = \
+            {} if len(view) * item_bytes / 2**20 <= cache_mb else None
+
+    def __len__(self) -> int:
+        return len(self.view)
+
+    def make(self, i: int) -> Any:
+        raise NotImplementedError
+
+    def __getitem__(self, i: int) -> Any:
+        if self.cache is not None and i in self.cache:
+            return self.cache[i]
+        item = self.make(i)
+        if self.cache is not None:
+            self.cache[i] = item
+        return item
