@@ -87,7 +87,8 @@ def test_eval_writes_magnitude_bins(vts_dataset: Path, tmp_path: Path) -> None:
     bm = d["by_magnitude"]
     assert len(bm["bins"]) == len(MAGNITUDE_EDGES_MM) - 1
     assert sum(b["n"] for b in bm["bins"]) + bm["n_unknown"] + bm["n_outside"] == d["n"]
-    assert sum(b["correct"] for b in bm["bins"]) == d["n"] - 1 - (bm["n_unknown"] > 0) * 0
+    if bm["n_unknown"] == bm["n_outside"] == 0:  # one direction made wrong on purpose
+        assert sum(b["correct"] for b in bm["bins"]) == d["n"] - 1
     truth = load_truth(vts_dataset, split, part)
     slips = [s for s, st in zip(truth.ids, truth.labels["state"], strict=True) if st == 2]
     mm, px_full = distances(slip_motion(vts_dataset, slips))
