@@ -128,7 +128,7 @@ def test_dihedral_turns_flow_vectors_with_the_frames() -> None:
         fx, fy = float(f[0][sel].mean()), float(f[1][sel].mean())
         return angle_to_class(math.degrees(math.atan2(-fy, fx)) % 360)
 
-    seq = moving_blob(5, -2, h=48, w=48, at=(24, 24))
+    seq = moving_blob(4, -4, h=48, w=48, at=(24, 24))  # 45 degrees: a bin centre
     frames = torch.from_numpy(seq.transpose(0, 3, 1, 2).astype(np.float32) / 255)
     grey = np.stack([cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for f in seq])
     x = torch.cat([frames, torch.from_numpy(crop_flow(grey, 48))], dim=1)
