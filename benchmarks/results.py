@@ -148,9 +148,8 @@ def run_one(run: Run, ds: Path, runs_dir: Path, boards: Path, retrain: bool,
                   "--out", str(out), "--quiet"]
     if run.config:
         train_args += ["--config", str(cfg)]
-    done = (out / "checkpoint.safetensors").exists()
-    train_s = run_cli(*train_args, log=log)
-    if not done:
+    if not (out / "checkpoint.safetensors").exists():  # a finished run is not trained again
+        train_s = run_cli(*train_args, log=log)
         (out / "train_seconds.txt").write_text(f"{train_s:.1f}\n")
     sub = runs_dir / f"{name}.csv"
     run_cli("predict", run.recipe, str(out / "checkpoint.safetensors"), "--dataset", str(ds),
@@ -164,7 +163,7 @@ def run_one(run: Run, ds: Path, runs_dir: Path, boards: Path, retrain: bool,
     for old in board.glob(f"{run.method}-*.json"):
         old.unlink()
     run_cli("leaderboard", "add", str(sub), "--dataset", str(ds), "--split", run.split,
-             "--root", str(boards), log=log)
+             "--root", str(boards), "--replace", log=log)
     tasks = metrics["tasks"]
 
     def acc(task: str, key: str = "accuracy") -> float | None:
