@@ -18,7 +18,8 @@ $(VENV)/.installed: pyproject.toml | $(BIN)/python
 	touch $@
 
 ## demo: the main job on the synthetic sensor: simulate -> check -> calibrate -> build -> verify ->
-## load -> train the small baselines -> predict -> eval -> leaderboard (11 min on 2 CPU cores)
+## load -> train the small baselines -> predict -> eval -> leaderboard (the training part trains two
+## runs side by side, one torch thread each; see docs/results.md for its time)
 demo: $(VENV)/.installed
 	$(BIN)/vtsbench simulate $(DEMO)/recordings --seed $(SEED) --static $(STATIC) \
 		--sequences $(SEQUENCES) --presses 20 --workers $(WORKERS) --overwrite --quiet
