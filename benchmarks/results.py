@@ -499,10 +499,12 @@ def findings(rows: list[dict[str, Any]], paper: list[dict[str, Any]],
         if r["run"].recipe == "resnet" and r["object"] is not None:
             mod = r["run"].config.get("modality", "rgb")
             ref = PAPER.get(("static", mod), {}).get("object")
+            parts = "+".join(r["run"].config.get("fit_parts") or ["train"])
             out.append(f"- {r['run'].method} on {r['dataset_name']} / {r['run'].split}: "
                        f"{r['object']:.1f} % over {r['classes']} classes (chance "
                        f"{100 / r['classes']:.1f} %), trained from random weights on "
-                       f"{r['n_train']} frames" + (f"; the paper's ResNet-50 {ref} % on its "
+                       f"{r['n_train']} frames ({parts})"
+                       + (f"; the paper's ResNet-50 {ref} % on its "
                                                    "own data" if ref else "") + ".")
     return out or ["- (no runs)"]
 
@@ -553,6 +555,7 @@ def main() -> None:
     import torch
 
     import vtsbench
+    from vtsbench.recipes import fit_view
 
     t0 = time.perf_counter()
     paths = {"synthetic": args.dataset, "octopi": args.octopi}
@@ -577,7 +580,7 @@ def main() -> None:
         r["params"] = tree_nodes(r["checkpoint"]) if run.recipe == "flow" else \
             parameters(run, n_obj)
         r["classes"] = n_obj
-        train = vtsbench.load(ds).split(run.split, "train")
+        train = fit_view(ds, run.split, run.config.get("fit_parts") or ["train"])
         r["n_train"] = len(train)
         if "state" in train.index.column_names:
             r["n_slip_train"] = train.index["state"].to_pylist().count("slip")
