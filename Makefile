@@ -8,7 +8,7 @@ WORKERS ?= 2
 STATIC ?= 300
 SEQUENCES ?= 360
 
-.PHONY: demo results test lint bench clean
+.PHONY: demo results results-demo test lint bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -18,7 +18,8 @@ $(VENV)/.installed: pyproject.toml | $(BIN)/python
 	touch $@
 
 ## demo: the main job on the synthetic sensor: simulate -> check -> calibrate -> build -> verify ->
-## load -> train the small baselines -> predict -> eval -> leaderboard (11 min on 2 CPU cores)
+## load -> train the small baselines -> predict -> eval -> leaderboard (the training part trains two
+## runs side by side, one torch thread each; see docs/results.md for its time)
 demo: $(VENV)/.installed
 	$(BIN)/vtsbench simulate $(DEMO)/recordings --seed $(SEED) --static $(STATIC) \
 		--sequences $(SEQUENCES) --presses 20 --workers $(WORKERS) --overwrite --quiet
@@ -37,9 +38,9 @@ demo: $(VENV)/.installed
 		--leaderboards $(DEMO)/leaderboards --out $(DEMO)/results.md --retrain
 	@echo "demo done: recordings in $(DEMO)/recordings (contact sheet $(DEMO)/preview.png), calibration report in $(DEMO)/recordings/calibration.safetensors.report/, dataset in $(DEMO)/dataset, runs in $(DEMO)/runs, leaderboards in $(DEMO)/leaderboards, results table in $(DEMO)/results.md"
 
-## results: the published figures: the demo's dataset -> docs/results.md and leaderboards/;
-## with OCTOPI=folder of the octopi GelSight Mini videos, also ResNet on that real data
-results: $(VENV)/.installed
+## results-demo: the published demo-profile figures: the demo's dataset -> docs/results.md and
+## leaderboards/; with OCTOPI=folder of the octopi GelSight Mini videos, also ResNet on that data
+results-demo: $(VENV)/.installed
 	test -f $(DEMO)/dataset/meta/info.json || $(MAKE) demo
 	$(if $(OCTOPI),test -f $(DEMO)/octopi-dataset/meta/info.json || ( \
 		$(BIN)/vtsbench manifest $(OCTOPI) --pattern '{object}_{session:d}.mov' --kind static \
@@ -47,8 +48,27 @@ results: $(VENV)/.installed
 		$(BIN)/vtsbench build $(DEMO)/octopi $(DEMO)/octopi-dataset --no-depth \
 			--workers $(WORKERS) --overwrite ))
 	$(BIN)/python benchmarks/results.py --dataset $(DEMO)/dataset --runs $(DEMO)/runs \
+		--leaderboards leaderboards --out docs/results.md --profile demo \
+		--summary $(DEMO)/results.json $(if $(OCTOPI),--octopi $(DEMO)/octopi-dataset)
+
+## results: the paper-scale profile: ~8,000 sequences and ~19,000 static frames simulated, the
+## paper's models (TimeSformer-base 224, ResNet-50 224) on a GPU when there is one, else on the
+## CPU with fewer steps (the page says which). WEIGHTS=folder of the SSv2 TimeSformer weights
+## (optional). Disk: about 170 GB at full counts (recordings 100, dataset 65); set
+## PAPER_STATIC / PAPER_SEQUENCES lower to fit a smaller disk.
+PAPER ?= paper-data
+PAPER_STATIC ?= 19000
+PAPER_SEQUENCES ?= 8000
+results: $(VENV)/.installed
+	test -f $(PAPER)/dataset/meta/info.json || ( \
+		$(BIN)/vtsbench simulate $(PAPER)/recordings --seed $(SEED) --static $(PAPER_STATIC) \
+			--sequences $(PAPER_SEQUENCES) --presses 20 --workers $(WORKERS) --overwrite --quiet && \
+		$(BIN)/vtsbench calibrate $(PAPER)/recordings \
+			--out $(PAPER)/recordings/calibration.safetensors --method lut --holdout 4 && \
+		$(BIN)/vtsbench build $(PAPER)/recordings $(PAPER)/dataset --workers $(WORKERS) --overwrite )
+	$(BIN)/python benchmarks/results.py --dataset $(PAPER)/dataset --runs $(PAPER)/runs \
 		--leaderboards leaderboards --out docs/results.md --profile results \
-		$(if $(OCTOPI),--octopi $(DEMO)/octopi-dataset)
+		--summary $(PAPER)/results.json $(if $(WEIGHTS),--pretrained $(WEIGHTS))
 
 ## test: install the dev extras and run the test suite on both cores
 test: $(VENV)/.installed

@@ -34,6 +34,7 @@ import statistics
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -64,25 +65,56 @@ class Run:
     dataset: str = "synthetic"   # which dataset (key of the --dataset/--octopi paths)
 
 
-def profile_runs(profile: str, octopi: bool) -> list[Run]:
-    """The runs of a profile: `demo` (the demo's, about 9 minutes on 2 CPU cores) or `results`
-    (the demo's runs, reused when trained, plus the flow baseline at full resolution)."""
-    tsf = {"config": "small", "modality": "rgb", "steps": 250, "batch_size": 8,
-           "slip_oversample": 3, "checkpoint_every": 50}
-    res = {"arch": "resnet18", "image_size": 112, "steps": 150, "batch_size": 16,
-           "checkpoint_every": 50, "gradcam": 4}
+#: The demo profile's configs (CPU, 2 cores, the whole `make demo` under 15 minutes).
+DEMO_TSF = {"config": "small", "modality": "rgb", "image_size": 64, "crop_px": 256,
+            "input": "frames+delta+flow", "steps": 300, "batch_size": 8,
+            "checkpoint_every": 100, "fit_parts": ["train", "val"]}
+DEMO_RESNET = {"arch": "resnet18", "image_size": 96, "crop_px": 320, "steps": 300,
+               "batch_size": 16, "checkpoint_every": 100, "gradcam": 4,
+               "fit_parts": ["train", "val"]}
+#: The results profile (paper scale: ~8,000 sequences, ~19,000 static frames, paper-size
+#: models): steps on a GPU, and the fewer steps it falls back to on a CPU (the page says so).
+PAPER_TSF = {"config": "paper", "modality": "rgb", "crop_px": 256,
+             "input": "frames+delta+flow", "batch_size": 16,
+             "lr": 1e-4, "warmup_steps": 200, "checkpoint_every": 500, "threads": None}
+PAPER_RESNET = {"arch": "resnet50", "image_size": 224, "crop_px": 320, "batch_size": 32,
+                "checkpoint_every": 500, "gradcam": 8, "threads": None}
+PAPER_STEPS = {"gpu": {"timesformer": 6000, "resnet": 6000},
+               "cpu": {"timesformer": 300, "resnet": 600}}
+
+
+def profile_runs(profile: str, octopi: bool, *, gpu: bool = False,
+                 pretrained: str | None = None) -> list[Run]:
+    """The runs of a profile: `demo` (CPU-sized models on the demo's dataset, about 9 minutes
+    on 2 CPU cores) or `results` (the paper's models, TimeSformer-base at 224 and ResNet-50,
+    meant for a paper-scale dataset on a GPU; on a CPU with PAPER_STEPS["cpu"] steps).
+    `pretrained`: folder of the SSv2 TimeSformer weights (results profile; without it the
+    paper-size TimeSformer starts from random weights, and the page says so)."""
     runs = []
-    for split in ("unseen_objects", "seen"):
-        runs.append(Run("flow-quarter", "flow", split, {"scale": 0.25}))
-        if profile == "results":
-            runs.append(Run("flow-full", "flow", split, {"scale": 1.0}))
-        runs.append(Run("timesformer-small-rgb", "timesformer", split, dict(tsf)))
-    runs.append(Run("resnet18-rgb", "resnet", "static_sessions", {**res, "modality": "rgb"}))
-    runs.append(Run("resnet18-depth", "resnet", "static_sessions", {**res, "modality": "depth"}))
+    if profile == "demo":
+        for split in ("unseen_objects", "seen"):
+            runs.append(Run("flow-shift", "flow", split, {"scale": 0.25}))
+            runs.append(Run("timesformer-small-rgb", "timesformer", split, dict(DEMO_TSF)))
+        runs.append(Run("resnet18-rgb", "resnet", "static_sessions",
+                        {**DEMO_RESNET, "modality": "rgb"}))
+        runs.append(Run("resnet18-depth", "resnet", "static_sessions",
+                        {**DEMO_RESNET, "modality": "depth"}))
+    else:
+        steps = PAPER_STEPS["gpu" if gpu else "cpu"]
+        tsf = {**PAPER_TSF, "steps": steps["timesformer"], "pretrained_path": pretrained,
+               "pretrained": pretrained is not None}
+        for split in ("unseen_objects", "seen"):
+            runs.append(Run("flow-shift", "flow", split, {"scale": 0.25}))
+            runs.append(Run("timesformer-base-rgb", "timesformer", split, dict(tsf)))
+        runs.append(Run("timesformer-base-depth", "timesformer", "seen",
+                        {**tsf, "modality": "depth"}))
+        for mod in ("rgb", "depth"):
+            runs.append(Run(f"resnet50-{mod}", "resnet", "static_sessions",
+                            {**PAPER_RESNET, "modality": mod, "steps": steps["resnet"]}))
     if octopi:
         runs.append(Run("resnet18-rgb", "resnet", "static_sessions",
-                        {**res, "modality": "rgb", "steps": 800, "gradcam": 8},
-                        dataset="octopi"))
+                        {**DEMO_RESNET, "modality": "rgb", "crop_px": None, "image_size": 112,
+                         "steps": 800, "gradcam": 8}, dataset="octopi"))
     return runs
 
 
@@ -116,9 +148,8 @@ def run_one(run: Run, ds: Path, runs_dir: Path, boards: Path, retrain: bool,
                   "--out", str(out), "--quiet"]
     if run.config:
         train_args += ["--config", str(cfg)]
-    done = (out / "checkpoint.safetensors").exists()
-    train_s = run_cli(*train_args, log=log)
-    if not done:
+    if not (out / "checkpoint.safetensors").exists():  # a finished run is not trained again
+        train_s = run_cli(*train_args, log=log)
         (out / "train_seconds.txt").write_text(f"{train_s:.1f}\n")
     sub = runs_dir / f"{name}.csv"
     run_cli("predict", run.recipe, str(out / "checkpoint.safetensors"), "--dataset", str(ds),
@@ -132,7 +163,7 @@ def run_one(run: Run, ds: Path, runs_dir: Path, boards: Path, retrain: bool,
     for old in board.glob(f"{run.method}-*.json"):
         old.unlink()
     run_cli("leaderboard", "add", str(sub), "--dataset", str(ds), "--split", run.split,
-             "--root", str(boards), log=log)
+             "--root", str(boards), "--replace", log=log)
     tasks = metrics["tasks"]
 
     def acc(task: str, key: str = "accuracy") -> float | None:
@@ -142,7 +173,13 @@ def run_one(run: Run, ds: Path, runs_dir: Path, boards: Path, retrain: bool,
         return None if v is None else 100.0 * v
 
     seconds = out / "train_seconds.txt"
+    d0 = tasks["direction"]["runs"][0] if "direction" in tasks else {}
+    s0 = tasks["state"]["runs"][0] if "state" in tasks else {}
     return {
+        "adjacent": None if d0.get("adjacent_error_share") is None
+        else 100.0 * d0["adjacent_error_share"],
+        "by_magnitude": d0.get("by_magnitude"), "per_state": s0.get("per_state"),
+        "environment": meta.get("environment"),
         "run": run, "name": name, "n": metrics["n_samples"],
         "train_s": float(seconds.read_text()) if seconds.exists() else None,
         "latency_ms": meta.get("latency_ms_per_sample_median"),
@@ -158,6 +195,39 @@ def run_one(run: Run, ds: Path, runs_dir: Path, boards: Path, retrain: bool,
     }
 
 
+def phase_reference(dataset: Path, split: str) -> dict[str, Any]:
+    """The simplest method that should work: phase correlation of the first and the last frame
+    (whole frame, full resolution, grey, no training) on the slipping test sequences; its
+    direction accuracy, accuracy per slip distance and median time per sequence."""
+    import math
+
+    import cv2
+    import numpy as np
+
+    import vtsbench
+    from vtsbench.evaluation.magnitude import by_magnitude, distances, slip_motion
+    from vtsbench.labels import angle_to_class
+
+    view = vtsbench.load(dataset).split(split, "test")
+    ok, ids, times = [], [], []
+    for s in view:
+        if s["state"] != "slip" or s["direction"] is None:
+            continue
+        t0 = time.perf_counter()
+        a, b = (cv2.cvtColor(np.ascontiguousarray(f), cv2.COLOR_RGB2GRAY).astype(np.float32)
+                for f in (s["rgb"][0], s["rgb"][-1]))
+        (dx, dy), _ = cv2.phaseCorrelate(a, b)
+        pred = angle_to_class(math.degrees(math.atan2(-dy, dx)) % 360.0)
+        times.append(time.perf_counter() - t0)
+        ok.append(pred == s["direction"])
+        ids.append(s["sample_id"])
+    mm, px = distances(slip_motion(dataset, ids))
+    return {"split": split, "n_dir": len(ok),
+            "direction": 100.0 * float(np.mean(ok)) if ok else None,
+            "latency_ms": 1000 * statistics.median(times) if times else None,
+            "by_magnitude": by_magnitude(ok, mm, px)}
+
+
 def parameters(run: Run, n_objects: int) -> int:
     """Trainable parameters of a run's model (flow: the fitted tree's nodes)."""
     import torch
@@ -166,9 +236,10 @@ def parameters(run: Run, n_objects: int) -> int:
         from vtsbench.models.timesformer import DualHeadTimesformer
 
         with torch.device("meta"):
-            m = DualHeadTimesformer.from_config(run.config.get("config", "small"),
-                                                run.config.get("modality", "rgb"),
-                                                pretrained=False)
+            m = DualHeadTimesformer.from_config(
+                run.config.get("config", "small"), run.config.get("modality", "rgb"),
+                pretrained=False, image_size=run.config.get("image_size"),
+                with_delta=run.config.get("input") in (None, "frames+delta"))
         return sum(p.numel() for p in m.parameters())
     if run.recipe == "resnet":
         from vtsbench.models.resnet import static_resnet
@@ -256,7 +327,7 @@ def render(rows: list[dict[str, Any]], paper_rows: list[dict[str, Any]], info: d
         "```",
         "",
         f"Machine: {info['machine']}. Devices: {info['devices']}. "
-        f"Whole run {elapsed / 60:.1f} min.",
+        f"Whole run {elapsed / 60:.1f} min. {info.get('steps_note', '')}",
         "",
         f"Synthetic benchmark: `{info['dataset_name']}` built from `vtsbench simulate` "
         f"({info['dataset_desc']}), dataset_sha256 `{info['dataset_sha'][:16]}...`. "
@@ -267,26 +338,33 @@ def render(rows: list[dict[str, Any]], paper_rows: list[dict[str, Any]], info: d
         "",
         "## Slip: state and direction",
         "",
-        "| method | split | params | CPU latency ms | train s | state % | direction % "
-        "(state given) | direction % end to end | within one bin % | angular error deg | "
-        "test n (slipping) |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| method | split | device | params | latency ms | train s | state % | direction % "
+        "(state given) | direction % end to end | within one bin % | adjacent share of errors "
+        "% | angular error deg | test n (slipping) |",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in slip:
         params = f"{r['params']} tree nodes" if r["run"].recipe == "flow" else _m(r["params"])
         lines.append(
-            f"| {r['run'].method} | {r['run'].split} | {params} | {_ms(r['latency_ms'])} | "
-            f"{_ms(r['train_s'])} | {_pct(r['state'])} | {_pct(r['direction'])} | "
-            f"{_pct(r['direction_e2e'])} | {_pct(r['within_one'])} | "
+            f"| {r['run'].method} | {r['run'].split} | {r.get('device', 'cpu')} | {params} | "
+            f"{_ms(r['latency_ms'])} | {_ms(r['train_s'])} | {_pct(r['state'])} | "
+            f"{_pct(r['direction'])} | {_pct(r['direction_e2e'])} | {_pct(r['within_one'])} | "
+            f"{_pct(r.get('adjacent'))} | "
             f"{'-' if r['angular'] is None else round(r['angular'])} | "
             f"{r['n']} ({r['n_dir']}) |")
+    for ref in info.get("references", []):
+        lines.append(f"| phase correlation, first and last frame (reference) | {ref['split']} | "
+                     f"cpu | none | {_ms(ref['latency_ms'])} | - | - | "
+                     f"{_pct(ref['direction'])} | - | - | - | - | - ({ref['n_dir']}) |")
     for p in paper_rows:
         if p["kind"] == "slip":
             for split in ("seen", "unseen_objects"):
                 ref = PAPER[("slip", split)]
-                lines.append(f"| {p['name']} | {split} (paper's data) | {_m(p['params'])} | "
-                             f"{_ms(p['latency_ms'])} | - | {ref['state']} | "
-                             f"{ref['direction']} | - | - | - | - |")
+                lines.append(f"| {p['name']} | {split} (paper's data) | {p['device']} | "
+                             f"{_m(p['params'])} | {_ms(p['latency_ms'])} | - | {ref['state']} | "
+                             f"{ref['direction']} | - | - | mostly adjacent | - | - |")
+    lines += magnitude_tables(slip, info.get("references", []))
+    lines += state_table(slip)
     lines += ["", "## Static: object recognition", "",
               "| method | dataset / split | classes | params | CPU latency ms | train s | "
               "object % | test n |", "|---|---|---:|---:|---:|---:|---:|---:|"]
@@ -301,6 +379,7 @@ def render(rows: list[dict[str, Any]], paper_rows: list[dict[str, Any]], info: d
                 lines.append(f"| {p['name']}, {mod} | paper's data | 15 | {_m(p['params'])} | "
                              f"{_ms(p['latency_ms'])} | - | {PAPER[('static', mod)]['object']} "
                              "| - |")
+    lines += other_table(info.get("other"))
     lines += ["", "## What the figures say", ""] + info["findings"] + [
         "", "## Where the figures are", "",
         f"- per run: `{info['runs']}/<dataset>-<method>-<split>/` (checkpoint, config), "
@@ -315,38 +394,101 @@ def render(rows: list[dict[str, Any]], paper_rows: list[dict[str, Any]], info: d
     return "\n".join(lines)
 
 
-def findings(rows: list[dict[str, Any]], paper: list[dict[str, Any]]) -> list[str]:
-    """Sentences comparing the baselines, from the figures."""
-    out = []
+def magnitude_tables(slip: list[dict[str, Any]], refs: list[dict[str, Any]]) -> list[str]:
+    """Per split: direction accuracy (state given) per slip-distance bin for every slip run and
+    the reference, with each run's pixels at its input (bin median)."""
+    out: list[str] = []
     for split in ("unseen_objects", "seen"):
-        by = {r["run"].recipe: r for r in rows if r["run"].split == split
-              and r["run"].method in ("flow-quarter", "timesformer-small-rgb")}
-        if set(by) != {"flow", "timesformer"}:
+        runs = [r for r in slip if r["run"].split == split and r.get("by_magnitude")]
+        ref = next((x for x in refs if x["split"] == split), None)
+        if not runs:
             continue
-        f, t = by["flow"], by["timesformer"]
-        if f["direction"] is None or t["direction"] is None:
-            continue
-        better = "beats" if t["direction"] > f["direction"] else (
-            "ties" if t["direction"] == f["direction"] else "does not beat")
-        ratio = (t["latency_ms"] / f["latency_ms"]) if f["latency_ms"] and t["latency_ms"] \
-            else float("nan")
-        out.append(
-            f"- {split}: the small TimeSformer {better} the flow baseline (quarter "
-            f"resolution) on direction "
-            f"({t['direction']:.1f} % against {f['direction']:.1f} % with the state given, "
-            f"{t['n_dir']} slipping test sequences; chance 12.5 %); state {t['state']:.1f} % "
-            f"against {f['state']:.1f} % (chance 33.3 %). Flow is {ratio:.1f}x faster per "
-            f"sequence ({f['latency_ms']:.1f} against {t['latency_ms']:.1f} ms).")
-        if t["direction"] <= f["direction"] and t.get("n_slip_train"):
-            out.append(
-                f"  Trained from random weights for {t['run'].config.get('steps')} steps on "
-                f"{t['n_slip_train']} slipping sequences (of {t['n_train']}; mirrored 4 ways, "
-                f"drawn {t['run'].config.get('slip_oversample', 1)}x as often), "
-                f"the state head learns and the direction head stays "
-                f"{'near chance' if t['direction'] < 25.0 else 'well below flow'}; the flow "
-                "baseline needs no training for direction. The paper's model starts from "
-                "motion-pretrained (SSv2) weights and trains on 7,925 sequences.")
-    flows = [r for r in rows if r["run"].method == "flow-quarter" and r["latency_ms"]]
+        head = ["slip distance mm", "n"] + [f"{r['run'].method} % (px at its input)"
+                                           for r in runs]
+        if ref:
+            head.append("phase correlation reference % (px on the sensor)")
+        out += ["", f"Direction by slip distance, {split} (state given; bins from the index's "
+                "motion; pixels: the bin's median at the method's input):", "",
+                "| " + " | ".join(head) + " |", "|---|---:" + "|---:" * (len(head) - 2) + "|"]
+        cols = [r["by_magnitude"]["bins"] for r in runs] + \
+            ([ref["by_magnitude"]["bins"]] if ref else [])
+        for i, b in enumerate(cols[0]):
+            hi = "inf" if b["hi_mm"] is None else f"{b['hi_mm']:g}"
+            cells = [f"[{b['lo_mm']:g}, {hi})", str(b["n"])]
+            for c in cols:
+                x = c[i]
+                cells.append("-" if x["accuracy"] is None else
+                             f"{100 * x['accuracy']:.1f} ({x['px_median']:.1f})")
+            out.append("| " + " | ".join(cells) + " |")
+    return out
+
+
+def other_table(other: dict[str, Any] | None) -> list[str]:
+    """The same profile's figures on another dataset (its --summary JSON)."""
+    if not other:
+        return []
+    refs = {r["split"]: r for r in other.get("references", [])}
+    out = ["", f"## The same recipes on another simulated dataset ({other.get('label', '')}"
+           f"dataset_sha256 `{other['dataset_sha256'][:16]}...`, same counts)", "",
+           "| method | split | state % | direction % (state given) | adjacent share of errors "
+           "% | object % | phase correlation reference direction % |",
+           "|---|---|---:|---:|---:|---:|---:|"]
+    for r in other["rows"]:
+        ref = refs.get(r["split"])
+        out.append(f"| {r['method']} | {r['split']} | {_pct(r.get('state'))} | "
+                   f"{_pct(r.get('direction'))} | {_pct(r.get('adjacent'))} | "
+                   f"{_pct(r.get('object'))} | {_pct(ref['direction']) if ref else '-'} |")
+    return out
+
+
+def state_table(slip: list[dict[str, Any]]) -> list[str]:
+    """State accuracy per true state of every slip run."""
+    runs = [r for r in slip if r.get("per_state")]
+    if not runs:
+        return []
+    names = list(runs[0]["per_state"])
+    out = ["", "State accuracy per true state (test part):", "",
+           "| method | split | " + " | ".join(f"{n} % (n)" for n in names) + " |",
+           "|---|---" + "|---:" * len(names) + "|"]
+    for r in runs:
+        cells = [f"{_pct(None if v['accuracy'] is None else 100 * v['accuracy'])} ({v['n']})"
+                 for v in r["per_state"].values()]
+        out.append(f"| {r['run'].method} | {r['run'].split} | " + " | ".join(cells) + " |")
+    return out
+
+
+def findings(rows: list[dict[str, Any]], paper: list[dict[str, Any]],
+             refs: list[dict[str, Any]] | None = None) -> list[str]:
+    """Sentences comparing each recipe with the phase-correlation reference and the paper."""
+    out = []
+    refs = refs or []
+    for split in ("unseen_objects", "seen"):
+        ref = next((x for x in refs if x["split"] == split), None)
+        p = PAPER[("slip", split)]
+        for r in rows:
+            if r["run"].split != split or r["direction"] is None:
+                continue
+            text = (f"- {split}, {r['run'].method}: direction {r['direction']:.1f} % with the "
+                    f"state given ({r['n_dir']} slipping test sequences; chance 12.5 %)")
+            if ref and ref["direction"] is not None:
+                gap = r["direction"] - ref["direction"]
+                text += (f", {abs(gap):.1f} points {'above' if gap >= 0 else 'below'} the phase "
+                         f"correlation of the first and last frame ({ref['direction']:.1f} %)")
+            text += f"; the paper's TimeSformer {p['direction']} % on its own data"
+            if r["state"] is not None:
+                text += f". State {r['state']:.1f} % (paper {p['state']} %)"
+            if r.get("adjacent") is not None:
+                text += f"; {r['adjacent']:.0f} % of the direction errors on the adjacent bin"
+            elif r["direction"] == 100.0:
+                text += "; no direction error"
+            out.append(text + ".")
+    flows = [r for r in rows if r["run"].recipe == "flow" and r["latency_ms"]]
+    tsfs = [r for r in rows if r["run"].recipe == "timesformer" and r["latency_ms"]]
+    if flows and tsfs:
+        f, t = flows[0], tsfs[0]
+        out.append(f"- Speed: the classical baseline takes {f['latency_ms']:.1f} ms a sequence, "
+                   f"the {t['run'].method} {t['latency_ms']:.1f} ms "
+                   f"({t['latency_ms'] / f['latency_ms']:.1f}x).")
     for p in paper:
         if p["kind"] == "slip" and p["device"] == "cpu" and flows:
             fast = min(r["latency_ms"] for r in flows)
@@ -355,11 +497,37 @@ def findings(rows: list[dict[str, Any]], paper: list[dict[str, Any]]) -> list[st
                        f"{p['latency_ms'] / fast:.0f}x faster ({fast:.1f} ms).")
     for r in rows:
         if r["run"].recipe == "resnet" and r["object"] is not None:
+            mod = r["run"].config.get("modality", "rgb")
+            ref = PAPER.get(("static", mod), {}).get("object")
+            parts = "+".join(r["run"].config.get("fit_parts") or ["train"])
             out.append(f"- {r['run'].method} on {r['dataset_name']} / {r['run'].split}: "
                        f"{r['object']:.1f} % over {r['classes']} classes (chance "
                        f"{100 / r['classes']:.1f} %), trained from random weights on "
-                       f"{r['n_train']} frames.")
+                       f"{r['n_train']} frames ({parts})"
+                       + (f"; the paper's ResNet-50 {ref} % on its "
+                                                   "own data" if ref else "") + ".")
     return out or ["- (no runs)"]
+
+
+def no_gpu() -> bool:
+    """True when no CUDA device is visible (checked without importing torch)."""
+    import shutil
+
+    return not (os.environ.get("CUDA_VISIBLE_DEVICES", "x") != "" and
+                (shutil.which("nvidia-smi") or Path("/dev/nvidia0").exists()))
+
+
+def steps_note(profile: str, gpu: bool, pretrained: str | None) -> str:
+    """What the page must say about the compute its figures had."""
+    if profile == "demo":
+        return ("Demo profile: CPU-sized models and steps (what `make demo` trains on 2 CPU "
+                "cores); the paper-scale results profile (`make results`) was not run for this "
+                "page.")
+    where = "on a GPU" if gpu else (
+        f"on the CPU, with fewer steps than on a GPU ({PAPER_STEPS['cpu']} against "
+        f"{PAPER_STEPS['gpu']}): the paper-size models are under-trained here")
+    init = "from the SSv2 weights" if pretrained else "from random weights (no SSv2 weights given)"
+    return f"Results profile: paper-size models trained {where}; TimeSformer-base {init}."
 
 
 def main() -> None:
@@ -373,28 +541,52 @@ def main() -> None:
     ap.add_argument("--profile", choices=("demo", "results"), default="demo")
     ap.add_argument("--retrain", action="store_true", help="train every run afresh")
     ap.add_argument("--repeats", type=int, default=5, help="forward passes timed per paper model")
+    ap.add_argument("--jobs", type=int, default=2 if no_gpu() else 1,
+                    help="runs trained side by side (default: 2 on a CPU-only machine)")
+    ap.add_argument("--pretrained", default=None,
+                    help="results profile: folder of the SSv2 TimeSformer weights")
+    ap.add_argument("--other", type=Path, default=None,
+                    help="summary JSON (--summary) of the same profile on another dataset, "
+                         "e.g. simulated with another seed: shown in its own table")
+    ap.add_argument("--summary", type=Path, default=None,
+                    help="also write the rows as JSON here (accuracies, devices, versions)")
     args = ap.parse_args()
 
     import torch
 
     import vtsbench
+    from vtsbench.recipes import fit_view
 
     t0 = time.perf_counter()
     paths = {"synthetic": args.dataset, "octopi": args.octopi}
     log: list[str] = []
     rows = []
-    for run in profile_runs(args.profile, args.octopi is not None):
+    gpu = torch.cuda.is_available()
+    device = "cuda" if gpu else "cpu"
+    runs = profile_runs(args.profile, args.octopi is not None, gpu=gpu,
+                        pretrained=args.pretrained)
+    logs: list[list[str]] = [[] for _ in runs]
+    # independent runs side by side, one torch thread each (the recipes pin it): on 2 cores
+    # two single-threaded runs beat one two-threaded run, whose OpenMP threads stall when the
+    # machine is busy; each run's figures do not depend on what runs beside it
+    with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        done = list(pool.map(lambda k: run_one(runs[k], paths[runs[k].dataset], args.runs,
+                                               args.leaderboards, args.retrain, logs[k]),
+                             range(len(runs))))
+    for run, r, run_log in zip(runs, done, logs, strict=True):
+        log += run_log
         ds = paths[run.dataset]
-        r = run_one(run, ds, args.runs, args.leaderboards, args.retrain, log)
         n_obj = len(vtsbench.load(ds).info.objects)
         r["params"] = tree_nodes(r["checkpoint"]) if run.recipe == "flow" else \
             parameters(run, n_obj)
         r["classes"] = n_obj
-        train = vtsbench.load(ds).split(run.split, "train")
+        train = fit_view(ds, run.split, run.config.get("fit_parts") or ["train"])
         r["n_train"] = len(train)
         if "state" in train.index.column_names:
             r["n_slip_train"] = train.index["state"].to_pylist().count("slip")
+        r["device"] = device if run.recipe != "flow" else "cpu"
         rows.append(r)
+    refs = [phase_reference(args.dataset, split) for split in ("unseen_objects", "seen")]
     run_cli("leaderboard", "render", "--root", str(args.leaderboards), log=log)
     devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
     paper_rows = []
@@ -415,7 +607,9 @@ def main() -> None:
             + ([torch.cuda.get_device_name(0)] if torch.cuda.is_available() else
                ["no GPU on this machine"])),
         "dataset_name": rows[0]["dataset_name"], "dataset_sha": rows[0]["dataset_sha"],
-        "dataset_desc": counts, "findings": findings(rows, paper_rows),
+        "dataset_desc": counts, "findings": findings(rows, paper_rows, refs),
+        "references": refs, "steps_note": steps_note(args.profile, gpu, args.pretrained),
+        "other": None if args.other is None else json.loads(args.other.read_text()),
     }
     elapsed = time.perf_counter() - t0
     page = render(rows, paper_rows, info, log, elapsed)
@@ -424,6 +618,14 @@ def main() -> None:
     print()
     print("## Slip" + page.split("## What the figures say")[0].split("## Slip", 1)[1])
     print("\n".join(info["findings"]))
+    if args.summary is not None:
+        args.summary.write_text(json.dumps(
+            {"dataset_sha256": info["dataset_sha"], "profile": args.profile,
+             "label": f"{info['dataset_desc']}; ",
+             "elapsed_s": round(elapsed, 1), "references": refs,
+             "rows": [{k: v for k, v in r.items() if k not in ("run", "checkpoint")}
+                      | {"method": r["run"].method, "split": r["run"].split}
+                      for r in rows]}, indent=1, default=str) + "\n")
     print(f"\nresults page: {args.out}; leaderboards: {args.leaderboards}; runs: {args.runs}")
 
 

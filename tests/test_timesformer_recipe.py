@@ -63,13 +63,28 @@ def test_delta_input_and_input_modes() -> None:
     x = torch.rand(2, 4, 3, 8, 8)
     small = {"config": "small", "modality": "rgb", "depth_scale_mm": 1.0, "input": None,
              "delta_gain": 4.0}
-    assert input_mode(small) == "delta" and input_mode({**small, "config": "paper"}) == "frames"
+    assert input_mode(small) == "frames+delta"
+    assert input_mode({**small, "config": "paper"}) == "frames+delta"
+    both = _normalize(x, small)
+    assert both.shape == (2, 4, 6, 8, 8)
+    assert torch.equal(both[:, :, :3], (x - 0.5) / 0.5)
+    small["input"] = "delta"
     d = _normalize(x, small)
+    assert torch.equal(both[:, :, 3:], d)
     assert torch.equal(d[:, 0], torch.zeros_like(d[:, 0]))  # the first frame minus itself
     assert torch.allclose(d, ((x - x[:, :1]) * 8).clamp(-1, 1), atol=1e-6)
     assert torch.equal(_normalize(x, {**small, "input": "frames"}), (x - 0.5) / 0.5)
     with pytest.raises(VtsError, match="input"):
         input_mode({**small, "input": "optical"})
+    with pytest.raises(VtsError, match="crop_px"):
+        input_mode({**small, "input": "frames+flow", "crop_px": None})
+    crop = {**small, "input": None, "crop_px": 16}
+    assert input_mode(crop) == "frames+delta+flow"
+    x5 = torch.rand(2, 4, 5, 8, 8)
+    out = _normalize(x5, crop)
+    assert out.shape == (2, 4, 8, 8, 8)
+    assert torch.equal(out[:, :, 6:], x5[:, :, 3:]) and torch.equal(out[:, :, :3],
+                                                                    (x5[:, :, :3] - 0.5) / 0.5)
 
 
 def test_slip_oversample_must_be_positive(vts_dataset: Path, tmp_path: Path) -> None:

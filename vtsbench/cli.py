@@ -699,6 +699,12 @@ def predict(
     lat = getattr(rec, "latency_s", None)
     if lat:
         extra["latency_ms_per_sample_median"] = round(1000 * sorted(lat)[len(lat) // 2], 3)
+    from .environment import environment
+
+    extra["environment"] = environment(device)
+    scale = getattr(rec, "input_scale_xy", None)  # model-input px per sensor px (x, y)
+    if scale:
+        extra["input_scale_xy"] = [round(float(v), 6) for v in scale]
     sub, meta = _run(write_submission, rows, out, method=method or rec.name,
                      dataset_path=dataset, recipe=str(recipe), seeds=[seed], extra=extra)
     typer.echo(f"wrote {len(rows)} rows for {n} samples to {sub} and {meta}")

@@ -17,7 +17,7 @@ import importlib.util
 import json
 import math
 import sys
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -262,3 +262,24 @@ def progress_iter(items: Iterable[Any], total: int, label: str, enabled: bool = 
         for item in items:
             yield item
             bar.advance(task)
+
+
+def fit_view(dataset_path: str | Path, split: str, parts: Sequence[str] = ("train",)) -> Any:
+    """The samples a recipe trains on: the union of `parts` of a split (default its `train`
+    part; a final model may fold `val` in when nothing is selected on it). Never the test
+    part, so that a leaderboard figure stays held out."""
+    import numpy as np
+
+    import vtsbench
+    from vtsbench.dataset.loader import View
+
+    if not parts:
+        raise VtsError("fit_parts must name at least one part")
+    if "test" in parts:
+        raise VtsError("fit_parts may not include the test part")
+    ds = vtsbench.load(dataset_path)
+    views = [ds.split(split, p) for p in parts]
+    if len(views) == 1:
+        return views[0]
+    pos = np.unique(np.concatenate([v._pos for v in views]))
+    return View(ds, views[0].kind, pos)

@@ -27,6 +27,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from .environment import deterministic
+
 CHECKPOINT_DIR = "checkpoints"
 FINAL = "checkpoint.safetensors"
 
@@ -46,6 +48,7 @@ class TrainConfig:
     keep_checkpoints: int = 2
     amp: bool = True  # mixed precision, on CUDA only
     extra: dict[str, Any] = field(default_factory=dict)  # written into the checkpoint metadata
+    threads: int | None = None  # torch CPU threads (pinned: reductions depend on it)
 
     @classmethod
     def from_recipe(cls, config: dict[str, Any], extra: dict[str, Any]) -> TrainConfig:
@@ -55,7 +58,7 @@ class TrainConfig:
                    warmup_steps=int(config["warmup_steps"]), schedule=config["schedule"],
                    grad_clip=config["grad_clip"],
                    checkpoint_every=int(config["checkpoint_every"]), amp=bool(config["amp"]),
-                   extra=extra)
+                   extra=extra, threads=config.get("threads"))
 
 
 @dataclass
@@ -285,6 +288,7 @@ def train_loop(model: torch.nn.Module, loss_fn: LossFn, dataset: Any, out_dir: s
     rank, world = dist_env() if distributed else (0, 1)
     if cfg.batch_size % world:
         raise ValueError(f"batch_size {cfg.batch_size} is not a multiple of {world} processes")
+    deterministic(cfg.threads)
     seed_everything(seed)
     model.to(dev)
     if optimizer is None:

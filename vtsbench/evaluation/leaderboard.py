@@ -17,6 +17,7 @@ import numpy as np
 from ..atomic import write_text_atomic
 from ..errors import VtsError
 from . import metrics as M
+from .magnitude import slip_motion
 from .report import evaluate, pct, score
 from .submission import Submission, load_truth
 
@@ -125,7 +126,8 @@ def rescore(root: str | Path, dataset: str | Path, force: bool = False) -> list[
             preds = {t: {int(s): np.asarray(a, np.int64)[order] for s, a in by.items()}
                      for t, by in stored["tasks"].items()}
             sub = Submission(path, e["meta"], e["submission_sha256"], preds)
-            doc = score(truth, sub)
+            motion = slip_motion(dataset, truth.ids) if truth.kind == "slip" else None
+            doc = score(truth, sub, motion)
             if e["metric_version"] != doc["metric_version"]:
                 e["rescored_from"].append(e["metric_version"])
             e.update(metric_version=doc["metric_version"], metrics=doc["tasks"],

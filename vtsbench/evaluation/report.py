@@ -11,6 +11,7 @@ import numpy as np
 
 from ..atomic import write_text_atomic
 from . import metrics as M
+from .magnitude import by_magnitude, distances, per_state, slip_motion
 from .submission import SLIP, Submission, Truth, load_submission, load_truth
 
 #: Metrics summarised over seeds (mean and spread) per task.
@@ -24,8 +25,12 @@ ARROWS = ("→", "↗", "↑", "↖", "←", "↙", "↓", "↘")
 COMPASS = ("E", "NE", "N", "NW", "W", "SW", "S", "SE")
 
 
-def score_run(truth: Truth, preds: dict[str, np.ndarray], seed: int = 0) -> dict[str, Any]:
-    """Metrics of one seed's predictions (task -> class per truth position, -1 = none)."""
+def score_run(truth: Truth, preds: dict[str, np.ndarray], seed: int = 0,
+              dist: tuple[np.ndarray, np.ndarray] | None = None) -> dict[str, Any]:
+    """Metrics of one seed's predictions (task -> class per truth position, -1 = none).
+
+    `dist`: slip distance per truth position in mm and in pixels at the model's input
+    (`magnitude.distances`); given, direction is also scored per distance bin."""
     out: dict[str, Any] = {}
     objects = np.asarray(truth.objects)
     for task, pred in preds.items():
@@ -43,25 +48,34 @@ def score_run(truth: Truth, preds: dict[str, np.ndarray], seed: int = 0) -> dict
             rep["slips_missed_by_state"] = c["slips_missed_by_state"] if sp is not None \
                 else M.NAN
             rep["state_given_accuracy"] = c["state_given_accuracy"]
+            if dist is not None:
+                rep["by_magnitude"] = by_magnitude(pred[req] == true, dist[0][req], dist[1][req])
             if sp is not None and len(req) > 1:
                 ok = ((pred[req] == true) & (sp[req] == SLIP)).astype(float)
                 idx = M.bootstrap_indices(len(req), seed=seed)
                 rep["end_to_end_accuracy_ci95"] = M.interval(ok[idx].mean(1))
             else:
                 rep["end_to_end_accuracy_ci95"] = [rep["end_to_end_accuracy"]] * 2
+        if task == "state":
+            rep["per_state"] = per_state(true, pred[req], truth.names[task])
         rep["labels"] = list(truth.names[task])
         out[task] = rep
     return out
 
 
-def score(truth: Truth, sub: Submission) -> dict[str, Any]:
-    """The metrics document of a submission: per task, one run per seed and a seed summary."""
+def score(truth: Truth, sub: Submission,
+          motion: dict[str, np.ndarray] | None = None) -> dict[str, Any]:
+    """The metrics document of a submission: per task, one run per seed and a seed summary.
+
+    `motion` (`magnitude.slip_motion` of the truth's ids) adds direction accuracy per slip
+    distance, in pixels at the input scale the submission's metadata states."""
     tasks: dict[str, Any] = {}
+    dist = None if motion is None else distances(motion, sub.meta.get("input_scale_xy"))
     for task in [t for t in HEADLINE if t in sub.preds]:
         runs = []
         for seed in sorted(sub.preds[task]):
             run = score_run(truth, {t: sub.preds[t][seed] for t in sub.preds
-                                    if seed in sub.preds[t]}, seed)[task]
+                                    if seed in sub.preds[t]}, seed, dist)[task]
             runs.append({"seed": seed, **run})
         tasks[task] = {"runs": runs, "summary": {
             m: M.seed_summary([r.get(m) for r in runs]) for m in HEADLINE[task]}}
@@ -141,6 +155,14 @@ def render_markdown(doc: dict[str, Any], figures: list[str]) -> str:
                   f"{'-' if mae is None else f'{mae:.1f}'} degrees",
                   f"- share of errors on the adjacent bin: {f('adjacent_error_share')} %",
                   f"- errors by bins off (0..4, seed {r0['seed']}): {r0['error_bins']}"]
+        if r0.get("by_magnitude"):
+            lines += ["", f"Direction by slip distance (state given, seed {r0['seed']}):", ""]
+            lines += magnitude_table(r0["by_magnitude"])
+    st = doc["tasks"].get("state")
+    if st and st["runs"][0].get("per_state"):
+        lines += ["", f"State accuracy per true state (seed {st['runs'][0]['seed']}): " + "; ".join(
+            f"{k} {pct(v['accuracy'])} % (n {v['n']})"
+            for k, v in st["runs"][0]["per_state"].items())]
     for task, t in doc["tasks"].items():
         r0 = t["runs"][0]
         lines += ["", f"## {task}: per object (seed {r0['seed']})", "",
@@ -155,6 +177,20 @@ def render_markdown(doc: dict[str, Any], figures: list[str]) -> str:
     if figures:
         lines += ["", "## Figures", ""] + [f"![{p}]({p})" for p in figures]
     return "\n".join(lines) + "\n"
+
+
+def magnitude_table(bm: dict[str, Any]) -> list[str]:
+    """Markdown rows of a `by_magnitude` result: bin in mm, pixels at the input, n, accuracy."""
+    def px(v: float | None) -> str:
+        return "-" if v is None else f"{v:.1f}"
+
+    rows = ["| slip mm | px at the model's input (min / median / max) | n | direction % |",
+            "|---|---|---:|---:|"]
+    for b in bm["bins"]:
+        hi = "inf" if b["hi_mm"] is None else f"{b['hi_mm']:g}"
+        rows.append(f"| [{b['lo_mm']:g}, {hi}) | {px(b['px_min'])} / {px(b['px_median'])} / "
+                    f"{px(b['px_max'])} | {b['n']} | {pct(b['accuracy'])} |")
+    return rows
 
 
 def _label(task: str, i: int, name: str) -> str:
@@ -212,7 +248,7 @@ def evaluate(submission: str | Path, dataset: str | Path, split: str, part: str 
     """Validate, score and (when out is given) write metrics.json, report.md and PNGs."""
     truth = load_truth(dataset, split, part)
     sub = load_submission(submission, truth, meta)
-    doc = score(truth, sub)
+    doc = score(truth, sub, slip_motion(dataset, truth.ids) if truth.kind == "slip" else None)
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)

@@ -70,8 +70,12 @@ def backbone_config(
     image_size: int | None = None,
     num_frames: int | None = None,
     dropout: float = 0.0,
+    with_delta: bool = False,
+    extra_channels: int = 0,
 ):
-    """The ``TimesformerConfig`` of a named configuration for a modality."""
+    """The ``TimesformerConfig`` of a named configuration for a modality; ``with_delta`` doubles
+    the input channels (each frame followed by its difference to the sequence's first);
+    ``extra_channels`` adds more (e.g. 2 of optical flow)."""
     from transformers import TimesformerConfig
 
     if name not in CONFIGS:
@@ -80,7 +84,7 @@ def backbone_config(
     return TimesformerConfig(
         image_size=image_size or s.image_size,
         patch_size=s.patch_size,
-        num_channels=channels_of(modality),
+        num_channels=channels_of(modality) * (2 if with_delta else 1) + extra_channels,
         num_frames=num_frames or s.num_frames,
         hidden_size=s.hidden_size,
         num_hidden_layers=s.num_hidden_layers,
@@ -89,10 +93,11 @@ def backbone_config(
         hidden_dropout_prob=dropout,
         attention_probs_dropout_prob=dropout,
         attention_type="divided_space_time",
+        vts_extra_channels=extra_channels,
     )
 
 
-def adapt_patch_weight(weight: torch.Tensor, channels: int) -> torch.Tensor:
+def adapt_patch_weight(weight: torch.Tensor, channels: int, extra: int = 0) -> torch.Tensor:
     """Adapt a 3-channel patch-embedding (or conv) weight ``(O, 3, k, k)`` to ``channels``.
 
     - 3: unchanged.
@@ -101,6 +106,9 @@ def adapt_patch_weight(weight: torch.Tensor, channels: int) -> torch.Tensor:
     """
     if weight.shape[1] != 3:
         raise ValueError(f"expected a 3-channel weight, got {tuple(weight.shape)}")
+    if extra:  # channels after the frames' (optical flow): their filters start at zero
+        base = adapt_patch_weight(weight, channels - extra)
+        return torch.cat([base, base.new_zeros(base.shape[0], extra, *base.shape[2:])], dim=1)
     mean = weight.mean(dim=1, keepdim=True)
     if channels == 3:
         return weight.clone()
@@ -108,6 +116,11 @@ def adapt_patch_weight(weight: torch.Tensor, channels: int) -> torch.Tensor:
         return mean
     if channels == 4:
         return torch.cat([weight, mean], dim=1)
+    if channels in (2, 6, 8):
+        # frames and their differences: the frame filters as above, the difference filters 0,
+        # so the pretrained model starts out seeing the frames alone
+        base = adapt_patch_weight(weight, channels // 2)
+        return torch.cat([base, torch.zeros_like(base)], dim=1)
     raise ValueError(f"cannot adapt 3 input channels to {channels}")
 
 
@@ -141,7 +154,8 @@ def load_pretrained_backbone(config, source: str | Path | None = None, cache_dir
         ) from None
     state = src.state_dict()
     key = "embeddings.patch_embeddings.projection.weight"
-    state[key] = adapt_patch_weight(state[key], config.num_channels)
+    state[key] = adapt_patch_weight(state[key], config.num_channels,
+                                    int(getattr(config, "vts_extra_channels", 0)))
     model = TimesformerModel(config)
     own = model.state_dict()
     for k in ("embeddings.position_embeddings", "embeddings.time_embeddings"):
@@ -204,6 +218,8 @@ class DualHeadTimesformer(nn.Module):
         num_frames: int | None = None,
         dropout: float = 0.0,
         cache_dir: str | Path | None = None,
+        with_delta: bool = False,
+        extra_channels: int = 0,
     ) -> DualHeadTimesformer:
         """Build a named configuration (``paper`` or ``small``) for a modality.
 
@@ -211,9 +227,12 @@ class DualHeadTimesformer(nn.Module):
         local Hugging Face cache; ``PretrainedWeightsMissing`` with a one-line message when
         absent) and to False for ``small`` unless ``pretrained_path`` is given.
         ``image_size`` and ``num_frames`` override the configuration's (tests use 32x32).
+        ``with_delta``: twice the modality's channels, frames and their differences;
+        ``extra_channels``: more input channels after those (2 for optical flow).
         """
         config = backbone_config(
-            name, modality, image_size=image_size, num_frames=num_frames, dropout=dropout
+            name, modality, image_size=image_size, num_frames=num_frames, dropout=dropout,
+            with_delta=with_delta, extra_channels=extra_channels,
         )
         if pretrained is None:
             pretrained = CONFIGS[name].pretrained or pretrained_path is not None
@@ -303,3 +322,42 @@ def parameter_counts(modality: str = "rgb") -> dict[str, dict[str, int]]:
             "total": count_parameters(model),
         }
     return out
+
+
+def dihedral_augment(x: torch.Tensor, direction: torch.Tensor, generator: torch.Generator,
+                     vector: tuple[int, int] | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """Rotate each square sequence of ``x`` (B, T, C, S, S) by a random multiple of 90 degrees
+    after a random left-right mirror (the 8 symmetries of the square, draws from
+    ``generator``) and map its direction label to match: a mirror maps k -> (4 - k) mod 8, a
+    quarter turn counter-clockwise k -> k + 2. Exact only on isotropic square crops (the
+    contact crop of the TimeSformer recipe); labels < 0 (no direction) stay. `vector`: the
+    channels holding a motion (x right, y down the rows; optical flow), whose values turn with
+    the frames: a mirror negates x, a quarter turn maps (x, y) to (y, -x)."""
+    from vtsbench.labels import MIRROR_X
+
+    if x.shape[-1] != x.shape[-2]:
+        raise ValueError(f"quarter turns need square frames, got {tuple(x.shape[-2:])}")
+    b = x.shape[0]
+    mirror = torch.rand(b, generator=generator) < 0.5
+    turns = torch.randint(0, 4, (b,), generator=generator)
+    d = direction.long().clone()
+    out = []
+    mx = torch.tensor(MIRROR_X)
+    for i in range(b):
+        xi = x[i].flip(-1) if bool(mirror[i]) else x[i]
+        # rot90 from the rows axis towards the columns axis turns the picture counter-clockwise
+        xi = torch.rot90(xi, int(turns[i]), dims=(-2, -1))
+        if vector is not None:
+            cx, cy = vector
+            vx, vy = xi[:, cx].clone(), xi[:, cy].clone()
+            if bool(mirror[i]):
+                vx = -vx
+            for _ in range(int(turns[i])):
+                vx, vy = vy, -vx
+            xi = xi.clone()
+            xi[:, cx], xi[:, cy] = vx, vy
+        out.append(xi)
+        if d[i] >= 0:
+            k = int(mx[d[i]]) if bool(mirror[i]) else int(d[i])
+            d[i] = (k + 2 * int(turns[i])) % NUM_DIRECTIONS
+    return torch.stack(out), d

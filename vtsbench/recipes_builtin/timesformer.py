@@ -6,8 +6,10 @@ global token, trained with the masked joint loss L = L_state + lambda * 1[state 
 through `vtsbench.training.train_loop` (seeded batches, safetensors checkpoints, exact resume,
 mixed precision on CUDA, DDP under torchrun). Configs: `small` (random init, trains on a CPU in
 minutes) and `paper` (base, 224x224, 8 frames, from `facebook/timesformer-base-finetuned-ssv2`
-on disk). Inputs: rgb, depth or rgbd. The checkpoint holds the weights and, in its metadata, the
-recipe's config, so `predict` rebuilds the same model.
+on disk). Inputs: rgb, depth or rgbd, cut around the contact (`crop_px`), each frame with its
+difference to the first and two channels of optical flow from the first frame (`input`), trained
+with the 8 label-mapped symmetries of the square crop. The checkpoint holds the weights and, in
+its metadata, the recipe's config, so `predict` rebuilds the same model.
 """
 
 from __future__ import annotations
@@ -17,9 +19,12 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from vtsbench.errors import VtsError
 from vtsbench.labels import STATES
-from vtsbench.recipes import Recipe, progress_iter
+from vtsbench.models.contact_crop import CachedItems
+from vtsbench.recipes import Recipe, fit_view, progress_iter
 
 MODALITIES = ("rgb", "depth", "rgbd")
 
@@ -36,26 +41,82 @@ def _frames(x: Any, modality: str, depth_scale_mm: float) -> Any:
     return out
 
 
+INPUTS = ("frames", "delta", "frames+delta", "frames+flow", "frames+delta+flow")
+
+
 def input_mode(config: dict[str, Any]) -> str:
-    """`input` of a config; null: `frames` for the paper's pretrained model (its SSv2 weights
-    saw frames), `delta` for the small one."""
-    mode = config.get("input") or ("frames" if config.get("config") == "paper" else "delta")
-    if mode not in ("frames", "delta"):
-        raise VtsError(f"input must be 'frames' or 'delta', not {mode!r}")
+    """`input` of a config; null: `frames+delta+flow` on contact crops, else `frames+delta` (each
+    frame and its difference to the first).
+    The `+flow` modes add two channels of optical flow from the first frame (contact crops
+    only, `crop_px`)."""
+    mode = config.get("input") or ("frames+delta+flow" if config.get("crop_px") else
+                                   "frames+delta")
+    if mode not in INPUTS:
+        raise VtsError(f"input must be one of {', '.join(INPUTS)}, not {mode!r}")
+    if mode.endswith("+flow") and not config.get("crop_px"):
+        raise VtsError(f"input {mode!r} needs crop_px (the flow is computed on the crop)")
     return mode
 
 
-def _normalize(x: Any, config: dict[str, Any]) -> Any:
-    """The model's input from a batch (B, T, C, H, W): `frames` as they are (normalised), or
-    `delta`: each frame minus the sequence's first, times `delta_gain`, clipped to [-1, 1].
+def uses_flow(config: dict[str, Any]) -> bool:
+    return input_mode(config).endswith("+flow")
 
-    Trained from scratch on a few hundred sequences, the small model sees little but the gel's
-    static shading in raw frames: on the demo's benchmark (216 training sequences, 250 steps)
-    raw frames gave 33.3 % state accuracy on unseen objects (one class), the differences 95.5 %."""
+
+def _normalize(x: Any, config: dict[str, Any]) -> Any:
+    """The model's input from a batch (B, T, C, H, W): `frames` as they are (normalised),
+    `delta`: each frame minus the sequence's first, times `delta_gain`, clipped to [-1, 1], or
+    `frames+delta`: both, concatenated along the channels (2C channels).
+
+    A difference alone does not say which way a texture moved (I(x - d) - I(x) of a periodic
+    texture is the same pattern for +d and a shifted -d): on the demo's benchmark the `delta`
+    input left the direction head at chance (13.5 % unseen objects, 25.9 % seen), while the
+    state head learnt (96.4 %). The frame beside its difference resolves the sign."""
+    mode = input_mode(config)
+    flow = None
+    if mode.endswith("+flow"):  # the last two channels: flow, already scaled (crop_flow)
+        x, flow = x[:, :, :-2], x[:, :, -2:]
     x = _frames(x, config["modality"], float(config["depth_scale_mm"]))
-    if input_mode(config) == "frames":
-        return x
-    return ((x - x[:, :1]) * float(config.get("delta_gain", 4.0))).clamp(-1.0, 1.0)
+    parts = [] if mode == "delta" else [x]
+    if "delta" in mode:
+        parts.append(((x - x[:, :1]) * float(config.get("delta_gain", 4.0))).clamp(-1.0, 1.0))
+    if flow is not None:
+        parts.append(flow)
+    return parts[0] if len(parts) == 1 else torch_cat(parts, dim=2)
+
+
+def torch_cat(parts: Any, dim: int) -> Any:
+    import torch
+
+    return torch.cat(parts, dim=dim)
+
+
+class CropData(CachedItems):
+    """A split part as (x (T, C, S, S) float32, target) cut around each sequence's contact
+    (`vtsbench.models.contact_crop`), held in memory once cut when it fits."""
+
+    def __init__(self, view: Any, config: dict[str, Any], size: int, frames: int) -> None:
+        from vtsbench.dataset.torch_dataset import frame_numbers
+
+        chans = {"rgb": 3, "depth": 1, "rgbd": 4}[config["modality"]] + 2 * uses_flow(config)
+        super().__init__(view, frames * chans * size * size * 4)
+        self.config, self.size, self.frames = config, size, frames
+        self.frame_numbers = frame_numbers
+        self.scale: tuple[float, float] | None = None
+
+    def make(self, i: int) -> Any:
+        import torch
+
+        from vtsbench.models.contact_crop import contact_crop
+
+        s = self.view[i]
+        x, self.scale = contact_crop(s, int(self.config["crop_px"]), self.size,
+                                     self.config["modality"], flow=uses_flow(self.config))
+        x = x[self.frame_numbers(len(x), self.frames)]
+        state = -1 if s.get("state_idx") is None else int(s["state_idx"])
+        direction = -1 if s.get("direction") is None else int(s["direction"])
+        return (torch.from_numpy(np.ascontiguousarray(x)),
+                {"sample_id": s["sample_id"], "state_idx": torch.tensor(state),
+                 "direction": torch.tensor(direction)})
 
 
 class TimesformerRecipe(Recipe):
@@ -65,6 +126,8 @@ class TimesformerRecipe(Recipe):
     def __init__(self) -> None:
         #: seconds of forward pass per sequence measured by the last predict
         self.latency_s: list[float] = []
+        #: model-input pixels per sensor pixel (x, y) of the last predict
+        self.input_scale_xy: tuple[float, float] | None = None
 
     def default_config(self) -> dict[str, Any]:
         return {
@@ -73,15 +136,22 @@ class TimesformerRecipe(Recipe):
             "image_size": None,         # None: the config's (small 112, paper 224)
             "num_frames": None,         # None: the config's (8)
             "pretrained_path": None,    # folder with the paper's weights (paper: HF cache too)
+            "pretrained": None,         # None: paper loads its weights, small does not;
+                                        # false: random init (paper-size, no weights on disk)
             "lambda_dir": 1.0,          # weight of the direction term of the masked loss
-            "flip": True,               # mirror sequences (labels mapped) while training
+            "flip": True,               # mirror sequences (labels mapped) while training;
+                                        # with crop_px also quarter turns (8 symmetries)
             "slip_oversample": 3,       # draw slipping training sequences this many times
-            "input": None,              # frames | delta (each frame minus the first);
-                                        # None: delta for small, frames for paper
+            "fit_parts": ["train"],     # parts of the split trained on (never test)
+            "input": None,              # frames | delta (each frame minus the first) |
+                                        # frames+delta | frames+flow | frames+delta+flow
+                                        # (None: frames+delta+flow with crop_px)
             "delta_gain": 4.0,          # delta input: gain before clipping to [-1, 1]
-            "steps": 300,
+            "crop_px": 320,             # square of this many sensor px around the contact,
+                                        # resized to image_size; None: the whole frame
+            "steps": 400,
             "batch_size": 8,
-            "lr": 3e-4,
+            "lr": 5e-4,
             "weight_decay": 0.05,
             "warmup_steps": 20,
             "schedule": "cosine",
@@ -90,6 +160,10 @@ class TimesformerRecipe(Recipe):
             "depth_scale_mm": 1.0,
             "checkpoint_every": 50,
             "amp": True,
+            "threads": 1,               # torch CPU threads, pinned: the same figures on any
+                                        # machine (null: torch's default); one per process:
+                                        # two OpenMP threads on a busy 2-core machine made a
+                                        # step 25x slower (17-21 s against 0.6-1.1 s)
         }
 
     # -- model and data -------------------------------------------------------------------
@@ -111,13 +185,25 @@ class TimesformerRecipe(Recipe):
         return DualHeadTimesformer.from_config(
             config["config"], config["modality"], config["pretrained_path"],
             pretrained=pretrained, image_size=config["image_size"],
-            num_frames=config["num_frames"], dropout=float(config["dropout"]))
+            num_frames=config["num_frames"], dropout=float(config["dropout"]),
+            with_delta="frames+delta" in input_mode(config),
+            extra_channels=2 if uses_flow(config) else 0)
 
     @staticmethod
     def _view_torch(view: Any, model: Any, config: dict[str, Any]) -> Any:
         size = int(model.config.image_size)
-        return view.to_torch(config["modality"], size=(size, size),
-                             frames=int(model.config.num_frames))
+        frames = int(model.config.num_frames)
+        if config.get("crop_px"):
+            return CropData(view, config, size, frames)
+        return view.to_torch(config["modality"], size=(size, size), frames=frames)
+
+    @staticmethod
+    def _input_scale(view: Any, data: Any, size: int) -> tuple[float, float]:
+        """Model-input pixels per sensor pixel (x, y)."""
+        if isinstance(data, CropData) and data.scale is not None:
+            return data.scale
+        h, w = view.dataset.info.resolution if hasattr(view, "dataset") else (size, size)
+        return size / w, size / h
 
     # -- train / predict --------------------------------------------------------------------
 
@@ -127,12 +213,11 @@ class TimesformerRecipe(Recipe):
         import torch
         from torch.utils.data import Subset
 
-        import vtsbench
-        from vtsbench.models.timesformer import flip_augment, masked_joint_loss
+        from vtsbench.models.timesformer import dihedral_augment, flip_augment, masked_joint_loss
         from vtsbench.training import TrainConfig, seed_everything, train_loop
 
         self._check(config)
-        view = vtsbench.load(dataset_path).split(split, "train")
+        view = fit_view(dataset_path, split, config.get("fit_parts") or ["train"])
         states = view.index["state_idx"].to_pylist() if "state_idx" in \
             view.index.column_names else []
         keep = [i for i, s in enumerate(states) if s is not None]
@@ -144,7 +229,7 @@ class TimesformerRecipe(Recipe):
         slip = STATES.index("slip")
         keep += [i for i in keep if states[i] == slip] * (int(config["slip_oversample"]) - 1)
         seed_everything(seed)  # the heads' random init depends on the seed
-        model = self._model(config, pretrained=None)
+        model = self._model(config, pretrained=config.get("pretrained"))
         data = Subset(self._view_torch(view, model, config), keep)
         lam = float(config["lambda_dir"])
 
@@ -154,7 +239,14 @@ class TimesformerRecipe(Recipe):
             if config.get("flip", False):
                 # drawn from the global torch RNG, which the checkpoints hold: exact resume
                 g = torch.Generator().manual_seed(int(torch.randint(0, 2**62, (1,))))
-                x, direction = flip_augment(x, direction, g)
+                # square contact crops allow quarter turns too; resized whole frames mirrors
+                # only (see flip_augment)
+                if config.get("crop_px"):  # flow channels (the last two) turn with the frames
+                    c = x.shape[2]
+                    x, direction = dihedral_augment(x, direction, g, (c - 2, c - 1)
+                                                    if uses_flow(config) else None)
+                else:
+                    x, direction = flip_augment(x, direction, g)
             x = _normalize(x.to(dev), config)
             state_logits, dir_logits = net(x)
             return masked_joint_loss(state_logits, dir_logits, target["state_idx"].to(dev),
@@ -183,6 +275,9 @@ class TimesformerRecipe(Recipe):
         model = self._model(config, pretrained=False)
         load_checkpoint(checkpoint, model)
         dev = resolve_device(device)
+        from vtsbench.environment import deterministic
+
+        deterministic(config.get("threads"))
         model.to(dev).eval()
         view = vtsbench.load(dataset_path).split(split, part)
         data = self._view_torch(view, model, config)
@@ -200,6 +295,7 @@ class TimesformerRecipe(Recipe):
                 sid = target["sample_id"]
                 rows.append({"sample_id": sid, "task": "state", "pred": STATES[int(ps.argmax())]})
                 rows.append({"sample_id": sid, "task": "direction", "pred": int(pd.argmax())})
+        self.input_scale_xy = self._input_scale(view, data, int(model.config.image_size))
         return rows
 
 

@@ -1,0 +1,141 @@
+"""Contact crops and the quarter-turn augmentation: the crop follows the moving imprint, and a
+turned or mirrored sequence moves in the direction its mapped label says."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from vtsbench.labels import angle_to_class
+from vtsbench.models.contact_crop import contact_crop, crop_box, crop_center
+from vtsbench.models.timesformer import dihedral_augment
+
+
+def moving_blob(dx: float, dy_rows: float, t: int = 4, h: int = 60, w: int = 80,
+                at: tuple[int, int] = (50, 25)) -> np.ndarray:
+    """(T, H, W, 3) uint8: a textured disc moving by (dx, dy_rows) px over the sequence."""
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    out = []
+    for k in range(t):
+        cx, cy = at[0] + dx * k / (t - 1), at[1] + dy_rows * k / (t - 1)
+        r = np.hypot(xs - cx, ys - cy)
+        tex = 0.5 + 0.5 * np.sin(0.9 * (xs - cx)) * np.cos(0.7 * (ys - cy))
+        img = np.where(r < 9, 60 + 150 * tex, 30)
+        out.append(np.repeat(img[..., None], 3, axis=2).astype(np.uint8))
+    return np.stack(out)
+
+
+def test_center_from_contact_then_motion_then_frame() -> None:
+    seq = moving_blob(4, 0)
+    contact = np.zeros(seq.shape[:3], bool)
+    contact[:, 10:20, 5:15] = True
+    assert crop_center(seq, contact) == pytest.approx((9.5, 14.5))
+    x, y = crop_center(seq, np.zeros_like(contact))
+    assert abs(x - 52) < 4 and abs(y - 25) < 3
+    still = np.repeat(seq[:1], 4, axis=0)
+    assert crop_center(still) == (39.5, 29.5)
+    assert crop_center(seq[:1]) == (39.5, 29.5)
+
+
+def test_box_stays_inside_the_frame() -> None:
+    assert crop_box((2.0, 2.0), 20, (60, 80)) == (0, 0, 20)
+    assert crop_box((79.0, 59.0), 20, (60, 80)) == (60, 40, 20)
+    assert crop_box((40.0, 30.0), 500, (60, 80)) == (10, 0, 60)
+
+
+def test_contact_crop_shapes_and_scale() -> None:
+    seq = moving_blob(4, 0)
+    depth = np.zeros(seq.shape[:3], np.float32)
+    x, scale = contact_crop({"rgb": seq, "depth": depth}, 40, 20, "rgbd")
+    assert x.shape == (4, 4, 20, 20) and x.dtype == np.float32 and scale == (0.5, 0.5)
+    assert x[:, :3].min() >= 0.0 and x[:, :3].max() <= 1.0
+    d, _ = contact_crop({"rgb": seq, "depth": depth}, 40, 20, "depth")
+    assert d.shape == (4, 1, 20, 20)
+
+
+def _direction(x: torch.Tensor) -> int:
+    """Direction class of the motion of a (T, C, S, S) sequence by phase correlation."""
+    import cv2
+
+    a = x[0].mean(0).numpy().astype(np.float32)
+    b = x[-1].mean(0).numpy().astype(np.float32)
+    (dx, dy), _ = cv2.phaseCorrelate(a, b)
+    return angle_to_class(math.degrees(math.atan2(-dy, dx)) % 360)
+
+
+@pytest.mark.parametrize(("dx", "dy_rows"), [(6, 0), (5, -5), (0, 6), (-4, 4)])
+def test_dihedral_labels_follow_the_frames(dx: float, dy_rows: float) -> None:
+    seq = moving_blob(dx, dy_rows, h=64, w=64, at=(32, 32))
+    x = torch.from_numpy(seq.transpose(0, 3, 1, 2).astype(np.float32) / 255)
+    label = _direction(x)
+    batch = x[None].repeat(16, 1, 1, 1, 1)
+    out, d = dihedral_augment(batch, torch.full((16,), label), torch.Generator().manual_seed(1))
+    assert len(set(d.tolist())) > 3  # several symmetries drawn
+    for xi, di in zip(out, d, strict=True):
+        assert _direction(xi) == int(di)
+    _, none = dihedral_augment(batch, torch.full((16,), -1), torch.Generator().manual_seed(1))
+    assert (none == -1).all()
+    with pytest.raises(ValueError, match="square"):
+        dihedral_augment(torch.zeros(1, 2, 3, 4, 5), torch.zeros(1), torch.Generator())
+
+
+def test_crop_flow_follows_the_motion() -> None:
+    import cv2
+
+    from vtsbench.models.contact_crop import FLOW_SCALE_PX, crop_flow
+
+    seq = moving_blob(6, -3, h=64, w=64, at=(30, 34))
+    grey = np.stack([cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for f in seq])
+    f = crop_flow(grey, 32)
+    assert f.shape == (4, 2, 32, 32) and not f[0].any()
+    # 6 px right and 3 px up the rows over the sequence: the strongest flow points that way
+    # (26.6 degrees, class 1) and is at most 3 px long at half size
+    mag = np.hypot(f[-1, 0], f[-1, 1])
+    fx, fy = f[-1, 0][mag > 0.5 * mag.max()].mean(), f[-1, 1][mag > 0.5 * mag.max()].mean()
+    assert angle_to_class(math.degrees(math.atan2(-fy, fx)) % 360) == 1
+    assert 0.5 < mag.max() * FLOW_SCALE_PX < 4.0
+    x, _ = contact_crop({"rgb": seq}, 40, 20, "rgb", flow=True)
+    assert x.shape == (4, 5, 20, 20)
+
+
+def test_pretrained_filters_of_extra_channels_start_at_zero() -> None:
+    from vtsbench.models.timesformer import adapt_patch_weight
+
+    w = torch.randn(4, 3, 2, 2)
+    a = adapt_patch_weight(w, 8, extra=2)
+    assert a.shape == (4, 8, 2, 2)
+    assert torch.equal(a[:, :3], w) and not a[:, 3:].any()
+    d = adapt_patch_weight(w, 3, extra=2)
+    assert torch.allclose(d[:, :1], w.mean(1, keepdim=True)) and not d[:, 1:].any()
+
+
+def test_dihedral_turns_flow_vectors_with_the_frames() -> None:
+    import cv2
+
+    from vtsbench.models.contact_crop import crop_flow
+
+    def flow_dir(frames: torch.Tensor) -> int:
+        grey = (frames.mean(1).numpy() * 255).astype(np.uint8)
+        f = crop_flow(grey, grey.shape[-1])[-1]
+        return _vec_dir(torch.from_numpy(f))
+
+    def _vec_dir(f: torch.Tensor) -> int:
+        mag = torch.hypot(f[0], f[1])
+        sel = mag > 0.5 * mag.max()
+        fx, fy = float(f[0][sel].mean()), float(f[1][sel].mean())
+        return angle_to_class(math.degrees(math.atan2(-fy, fx)) % 360)
+
+    seq = moving_blob(4, -4, h=48, w=48, at=(24, 24))  # 45 degrees: a bin centre
+    frames = torch.from_numpy(seq.transpose(0, 3, 1, 2).astype(np.float32) / 255)
+    grey = np.stack([cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for f in seq])
+    x = torch.cat([frames, torch.from_numpy(crop_flow(grey, 48))], dim=1)
+    label = _vec_dir(x[-1, 3:])
+    assert label == flow_dir(frames)
+    out, d = dihedral_augment(x[None].repeat(12, 1, 1, 1, 1), torch.full((12,), label),
+                              torch.Generator().manual_seed(3), vector=(3, 4))
+    assert len(set(d.tolist())) > 3
+    for xi, di in zip(out, d, strict=True):
+        assert _vec_dir(xi[-1, 3:]) == int(di) == flow_dir(xi[:, :3])

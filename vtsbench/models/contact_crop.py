@@ -1,0 +1,138 @@
+"""Square crops of a sequence around where the gel is touched, for models that need the
+resolution where the contact is (the slip TimeSformer recipe).
+
+The centre comes from the sequence itself, never from a label: the union of its contact masks
+(a dataset built with depth), else where the frames change most against the first one, else the
+frame's centre. The crop is `crop_px` sensor pixels on a side (shifted inside the frame), resized
+to `size`: an isotropic square, so quarter turns of it keep slip-direction labels exact.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+#: Grey levels of (blurred) change against the first frame below which a pixel counts as still.
+MOTION_LEVEL = 4.0
+
+
+def crop_center(rgb: np.ndarray, contact: np.ndarray | None = None) -> tuple[float, float]:
+    """(x, y) in pixels of the crop centre of a (T, H, W, 3) uint8 sequence."""
+    import cv2
+
+    h, w = rgb.shape[1:3]
+    if contact is not None:
+        m = np.asarray(contact).any(axis=0)
+        if m.any():
+            ys, xs = np.nonzero(m)
+            return float(xs.mean()), float(ys.mean())
+    if len(rgb) < 2:
+        return (w - 1) / 2.0, (h - 1) / 2.0
+    g = rgb.mean(axis=-1, dtype=np.float32)
+    energy = cv2.GaussianBlur(np.abs(g[1:] - g[:1]).max(axis=0), (0, 0), 3.0)
+    energy[energy < MOTION_LEVEL] = 0.0
+    total = float(energy.sum())
+    if total <= 0.0:
+        return (w - 1) / 2.0, (h - 1) / 2.0
+    ys, xs = np.mgrid[0:h, 0:w]
+    return float((xs * energy).sum() / total), float((ys * energy).sum() / total)
+
+
+def crop_box(center: tuple[float, float], crop_px: int, shape: tuple[int, int]
+             ) -> tuple[int, int, int]:
+    """(x0, y0, side) of a square of side min(crop_px, H, W) around center, inside the frame."""
+    h, w = shape
+    side = int(min(crop_px, h, w))
+    x0 = round(center[0] - side / 2)
+    y0 = round(center[1] - side / 2)
+    return min(max(x0, 0), w - side), min(max(y0, 0), h - side), side
+
+
+def crop_sequence(frames: np.ndarray, box: tuple[int, int, int], size: int) -> np.ndarray:
+    """(T, H, W[, C]) frames cut to box and resized (area) to size x size; dtype kept."""
+    import cv2
+
+    x0, y0, side = box
+    out = []
+    for f in frames:
+        c = np.ascontiguousarray(f[y0:y0 + side, x0:x0 + side])
+        out.append(cv2.resize(c, (size, size), interpolation=cv2.INTER_AREA)
+                   if side != size else c)
+    return np.stack(out)
+
+
+#: Flow channels are in pixels at the model's input divided by this, then clipped to [-1, 1]:
+#: large enough that a slip of the simulator (at most 1.5 mm, 12.5 px at a 256-pixel crop
+#: resized to 64) is not clipped, whose angle clipping both axes would bend (4 px: 65 % unseen
+#: objects direction, 92 % of the errors adjacent).
+FLOW_SCALE_PX = 16.0
+
+
+def crop_flow(grey: np.ndarray, size: int) -> np.ndarray:
+    """(T, 2, size, size) float32: DIS optical flow (OpenCV, `medium` preset) from the first
+    frame to each frame of a (T, S, S) uint8 crop, resized to size and expressed in pixels at
+    that size over FLOW_SCALE_PX, clipped to [-1, 1] (x right, y down the rows). Frame 0: 0."""
+    import cv2
+
+    dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+    side = grey.shape[-1]
+    out = np.zeros((len(grey), 2, size, size), np.float32)
+    for t in range(1, len(grey)):
+        f = dis.calc(grey[0], grey[t], None)
+        f = cv2.resize(f, (size, size), interpolation=cv2.INTER_AREA) * (size / side)
+        out[t] = np.clip(f.transpose(2, 0, 1) / FLOW_SCALE_PX, -1.0, 1.0)
+    return out
+
+
+def contact_crop(sample: dict[str, Any], crop_px: int, size: int, modality: str,
+                 flow: bool = False) -> tuple[np.ndarray, tuple[float, float]]:
+    """A sample's sequence cut around its contact: (T, C, size, size) float32 (rgb in [0, 1],
+    then depth in mm for rgbd; depth alone for depth; with `flow`, two more channels: the
+    optical flow from the first frame, `crop_flow`) and the model-input pixels per sensor
+    pixel (x, y)."""
+    rgb = sample["rgb"]
+    box = crop_box(crop_center(rgb, sample.get("contact")), crop_px, rgb.shape[1:3])
+    parts = []
+    if modality in ("rgb", "rgbd"):
+        parts.append(crop_sequence(rgb, box, size).astype(np.float32).transpose(0, 3, 1, 2)
+                     / 255.0)
+    if modality in ("depth", "rgbd"):
+        d = crop_sequence(np.asarray(sample["depth"], dtype=np.float32), box, size)
+        parts.append(d[:, None])
+    if flow:
+        import cv2
+
+        if modality == "depth":  # the depth maps as grey levels (0 to the deepest point)
+            d = crop_sequence(np.asarray(sample["depth"], dtype=np.float32), box, box[2])
+            grey = np.clip(255 * d / max(float(d.max()), 1e-6), 0, 255).astype(np.uint8)
+        else:
+            grey = np.stack([cv2.cvtColor(f, cv2.COLOR_RGB2GRAY)
+                             for f in crop_sequence(rgb, box, box[2])])
+        parts.append(crop_flow(grey, size))
+    scale = size / box[2]
+    return np.concatenate(parts, axis=1), (scale, scale)
+
+
+class CachedItems:
+    """A map-style dataset over a dataset view whose items (`make(i)`) are kept in memory once
+    made, when all of them together fit in `cache_mb` (`item_bytes` each)."""
+
+    def __init__(self, view: Any, item_bytes: float, cache_mb: float = 2048.0) -> None:
+        self.view = view
+        self.cache: dict[int, Any] | None = \
+            {} if len(view) * item_bytes / 2**20 <= cache_mb else None
+
+    def __len__(self) -> int:
+        return len(self.view)
+
+    def make(self, i: int) -> Any:
+        raise NotImplementedError
+
+    def __getitem__(self, i: int) -> Any:
+        if self.cache is not None and i in self.cache:
+            return self.cache[i]
+        item = self.make(i)
+        if self.cache is not None:
+            self.cache[i] = item
+        return item
