@@ -322,6 +322,22 @@ def test_nan_and_infinity_options_are_refused(tmp_path: Path, args: tuple[str, .
     assert sorted(p.name for p in tmp_path.iterdir()) == []
 
 
+def test_bad_option_from_the_console_is_one_line(tmp_path: Path) -> None:
+    """The console entry point prints a usage error as one line (not click's box), exit 2."""
+    res = subprocess.run([sys.executable, "-m", "vtsbench", "manifest", str(tmp_path),
+                          "--pattern", "{object}.png", "--mm-per-px", "nan"],
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2 and res.stdout == "", res
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--mm-per-px" in lines[0] and "finite" in lines[0], lines
+    ok = subprocess.run([sys.executable, "-m", "vtsbench", "--help"], capture_output=True,
+                        text=True, timeout=60)
+    assert ok.returncode == 0 and "build" in ok.stdout
+    bad = subprocess.run([sys.executable, "-m", "vtsbench", "verify", str(tmp_path / "none")],
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode in (1, 2) and "Traceback" not in bad.stderr
+
+
 @pytest.mark.parametrize("literal", ["NaN", "Infinity", "-Infinity", "1e999"])
 def test_nan_in_a_manifest_is_refused(make_recordings, literal: str) -> None:
     root, _ = make_recordings()

@@ -796,8 +796,26 @@ def collect(
 
 
 def main() -> None:
-    """Console entry point."""
-    app(prog_name="vtsbench")
+    """Console entry point. A bad option or argument is one line on stderr naming it (exit 2),
+    like every other user error, instead of click's multi-line usage box."""
+    try:  # typer >= 0.2x carries its own click, whose exceptions derive from this
+        from typer import TyperException as ClickError
+    except ImportError:  # pragma: no cover - older typer on the click package
+        from click import ClickException as ClickError
+
+    try:
+        rv = app(prog_name="vtsbench", standalone_mode=False)
+    except typer.Abort:
+        print("error: aborted", file=sys.stderr)
+        sys.exit(1)
+    except ClickError as e:
+        ctx = getattr(e, "ctx", None)
+        hint = f" (see `{ctx.command_path} --help`)" if ctx is not None else ""
+        if e.format_message():  # empty after a group's help was shown for no command
+            print(f"error: {e.format_message()}{hint}", file=sys.stderr)
+        sys.exit(getattr(e, "exit_code", 2))
+    # a command's typer.Exit(code) comes back as its code; a command that returns is a success
+    sys.exit(rv if isinstance(rv, int) else 0)
 
 
 if __name__ == "__main__":  # pragma: no cover
