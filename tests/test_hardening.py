@@ -305,6 +305,27 @@ def test_check_says_what_it_does_with_a_16_bit_frame(make_recordings) -> None:
     np.testing.assert_array_equal(read_image(root / "static.png"), img[..., ::-1])
 
 
+def test_an_exif_oriented_frame_is_turned_and_said(tmp_path: Path) -> None:
+    """OpenCV applies the EXIF orientation (its documented IMREAD_COLOR behaviour); check's
+    note says so, with the stored and the read size."""
+    from PIL import Image
+
+    from vtsbench.recordings.media import frame_notes, read_image
+
+    img = np.zeros((20, 40, 3), np.uint8)
+    img[:5] = 255  # a white band along the top, so the turn is visible
+    exif = Image.Exif()
+    exif[0x0112] = 6  # rotate 90 degrees clockwise to display
+    Image.fromarray(img).save(tmp_path / "o.jpg", exif=exif.tobytes(), quality=95)
+    notes = frame_notes(tmp_path / "o.jpg")
+    assert len(notes) == 1 and "EXIF orientation" in notes[0] and "40x20 stored" in notes[0]
+    out = read_image(tmp_path / "o.jpg")
+    assert out.shape == (40, 20, 3)
+    assert out[:, -5:].mean() > 200 and out[:, :10].mean() < 30  # the top band is now right
+    Image.fromarray(img).save(tmp_path / "plain.jpg", quality=95)
+    assert frame_notes(tmp_path / "plain.jpg") == []
+
+
 # -- 7: NaN and infinity --------------------------------------------------------------------------
 
 
