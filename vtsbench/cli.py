@@ -19,8 +19,35 @@ app = typer.Typer(
     no_args_is_help=True,
     rich_markup_mode="rich",
     pretty_exceptions_enable=False,
-    add_completion=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
 )
+
+
+def _version(value: bool) -> None:
+    """`vtsbench --version`: the installed package's version."""
+    if value:
+        from importlib.metadata import version
+
+        typer.echo(f"vtsbench {version('vtsbench')}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[bool, typer.Option(
+        "--version", callback=_version, is_eager=True,
+        help="Print the version and exit.")] = False,
+) -> None:
+    """Options of `vtsbench` itself (the app's help text is the Typer's)."""
+
+
+def _choice(*values: str, **kw):
+    """An option whose value is one of `values`: --help lists them and the shell completes
+    them; the command checks the value itself (its one-line error names the choices)."""
+    def complete(incomplete: str) -> list[str]:
+        return [v for v in values if v.startswith(incomplete)]
+
+    return typer.Option(metavar="[" + "|".join(values) + "]", autocompletion=complete, **kw)
 
 
 def _fail(err: Exception, code: int = 2) -> None:
@@ -97,8 +124,9 @@ def simulate(
         callback=_finite,
         min=1e-4, help="Scale of the sensor, mm per pixel.")] = 0.03,
     workers: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 1,
-    overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
-    quiet: Annotated[bool, typer.Option(help="No progress bar.")] = False,
+    overwrite: Annotated[bool, typer.Option(
+        "--overwrite", help="Replace OUT if it exists.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
 ) -> None:
     """Write a synthetic recordings folder with exact ground-truth depth and gradients.
 
@@ -115,7 +143,8 @@ def simulate(
 @app.command()
 def check(
     folder: Annotated[Path, typer.Argument(help="Recordings folder (with recordings.json).")],
-    deep: Annotated[bool, typer.Option(help="Decode every frame of every video (slow).")] = False,
+    deep: Annotated[bool, typer.Option(
+        "--deep", help="Decode every frame of every video (slow).")] = False,
     workers: Annotated[int, typer.Option(min=1, help="Threads reading media.")] = 2,
     labels: Annotated[Path | None, typer.Option(
         help="Labels CSV given to `vtsbench manifest --labels`: list its rows that match no "
@@ -144,7 +173,8 @@ def manifest(
         help="File-name pattern relative to FOLDER, e.g. '{object}_{take}.mov'. Fields: object, "
              "take, session, state, direction; '{name:d}' matches digits only; fields match "
              "greedily from the left; '/' matches sub-folders.")],
-    kind: Annotated[str | None, typer.Option(
+    kind: Annotated[str | None, _choice(
+        "static", "sequence", "press",
         help="static, sequence or press (default: sequence for videos and image folders, "
              "static for images).")] = None,
     sensor: Annotated[str, typer.Option(help="Sensor id.")] = "unknown",
@@ -168,7 +198,8 @@ def manifest(
     stride: Annotated[int | None, typer.Option(
         min=1, help="Step between windows; with --kind static, a static frame every STRIDE "
                     "frames of each video or image folder (else its first frame).")] = None,
-    force: Annotated[bool, typer.Option(help="Replace an existing recordings.json.")] = False,
+    force: Annotated[bool, typer.Option(
+        "--force", help="Replace an existing recordings.json.")] = False,
     out: Annotated[Path | None, typer.Option(
         help="Write recordings.json into this folder instead (for read-only data); paths in it "
              "point back to FOLDER.")] = None,
@@ -218,7 +249,8 @@ def build(
         help="Calibration file (default: RECORDINGS/calibration.safetensors, as written by "
              "`vtsbench calibrate RECORDINGS --out RECORDINGS/calibration.safetensors`).")
     ] = None,
-    solver: Annotated[str, typer.Option(help="Depth solver: dct, dst or masked.")] = "dct",
+    solver: Annotated[str, _choice("dct", "dst", "masked",
+                                   help="Depth solver: dct, dst or masked.")] = "dct",
     no_depth: Annotated[bool, typer.Option(
         "--no-depth", help="RGB only: no depth or contact arrays, no calibration needed (for "
                            "sensors without calibration presses).")] = False,
@@ -229,9 +261,10 @@ def build(
         help="Dask scheduler address (tcp://host:8786), or 'local' for a LocalCluster of "
              "--workers processes. OUT must be on a file system the workers share.")] = None,
     skip_bad: Annotated[bool, typer.Option(
-        help="Leave bad recordings out (listed in meta/build_report.json) instead of "
+        "--skip-bad", help="Leave bad recordings out (listed in meta/build_report.json) instead of "
              "stopping.")] = False,
-    overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
+    overwrite: Annotated[bool, typer.Option(
+        "--overwrite", help="Replace OUT if it exists.")] = False,
     version: Annotated[str, typer.Option(
         help="Dataset version (semantic version of the content).")] = "1.0.0",
     compression_level: Annotated[int, typer.Option(
@@ -240,7 +273,7 @@ def build(
     shard_mb: Annotated[float, typer.Option(
         callback=_finite,
         help="Target uncompressed RGB shard size in MB (whole samples per shard).")] = 32.0,
-    quiet: Annotated[bool, typer.Option(help="No progress bars.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", help="No progress bars.")] = False,
     holdout_objects: Annotated[Path | None, typer.Option(
         help="File of object names, one a line: adds the split scheme given_objects, test = "
              "exactly these objects, val = other whole objects.")] = None,
@@ -317,6 +350,7 @@ def info(
 def verify(
     dataset: Annotated[Path, typer.Argument(help="Dataset folder (made by vtsbench build).")],
     quick: Annotated[bool, typer.Option(
+        "--quick",
         help="Skip decoding every chunk (checksums, schema, index, splits and shapes only).")
     ] = False,
 ) -> None:
@@ -337,7 +371,7 @@ def export_hf(
     license: Annotated[str, typer.Option(
         help="License id for the card (a Hub license id: cc-by-4.0, mit, other...).")
     ] = "unknown",
-    quiet: Annotated[bool, typer.Option(help="No progress bar.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
 ) -> None:
     """Write every sample as parquet under DATASET/hf/ for Hugging Face `datasets`: one config
     per split scheme (slip_unseen_objects, slip_seen, static_sessions, ...), labels as
@@ -363,11 +397,12 @@ def push(
     dataset: Annotated[Path, typer.Argument(help="Dataset folder (made by vtsbench build).")],
     repo_id: Annotated[str, typer.Argument(help="Hub dataset repository, e.g. my-lab/tactile.")],
     dry_run: Annotated[bool, typer.Option(
-        help="List what would be uploaded and stop (no network).")] = False,
+        "--dry-run", help="List what would be uploaded and stop (no network).")] = False,
     zarr: Annotated[bool, typer.Option(
         help="Upload the Zarr arrays (data/) too, so vtsbench.load reads the repository; "
              "--no-zarr uploads the parquet copy, index, splits and card only.")] = True,
-    private: Annotated[bool, typer.Option(help="Create the repository private.")] = False,
+    private: Annotated[bool, typer.Option(
+        "--private", help="Create the repository private.")] = False,
     revision: Annotated[str | None, typer.Option(help="Branch to push to.")] = None,
 ) -> None:
     """Upload a verified dataset to the Hugging Face Hub (run `vtsbench export-hf` first for
@@ -400,7 +435,8 @@ def push(
 def calibrate(
     recordings: Annotated[Path, typer.Argument(help="Recordings folder with ball presses.")],
     out: Annotated[Path, typer.Option("--out", help="Calibration file to write (.safetensors).")],
-    method: Annotated[str, typer.Option(
+    method: Annotated[str, _choice(
+        "lut", "poly", "mlp",
         help="lut (fast lookup), poly (polynomial) or mlp (small network, needs torch).")
     ] = "poly",
     holdout: Annotated[int | None, typer.Option(
@@ -412,12 +448,15 @@ def calibrate(
     background: Annotated[Path | None, typer.Option(
         help="No-contact image (default: the sessions' backgrounds).")] = None,
     estimate_background: Annotated[bool, typer.Option(
+        "--estimate-background",
         help="Use the per-pixel median of the press frames as the background.")] = False,
     report: Annotated[Path | None, typer.Option(
         help="Report folder (default: FILE.report beside the calibration).")] = None,
-    solver: Annotated[str, typer.Option(
+    solver: Annotated[str, _choice(
+        "dct", "dst", "masked",
         help="Poisson solver scoring the held-out presses: dct, dst or masked.")] = "dct",
-    device: Annotated[str, typer.Option(
+    device: Annotated[str, _choice(
+        "auto", "cpu", "cuda",
         help="mlp training device: auto (CUDA when present), cpu or cuda.")] = "auto",
     bins: Annotated[int | None, typer.Option(help="lut: colour bins per channel (32).")] = None,
     cells: Annotated[int | None, typer.Option(
@@ -428,7 +467,8 @@ def calibrate(
     width: Annotated[int | None, typer.Option(help="mlp: units per hidden layer (32).")] = None,
     depth: Annotated[int | None, typer.Option(help="mlp: hidden layers (3).")] = None,
     epochs: Annotated[int | None, typer.Option(help="mlp: training epochs (40).")] = None,
-    circles: Annotated[str, typer.Option(
+    circles: Annotated[str, _choice(
+        "label", "detect",
         help="label: use labelled circles, detect the others; detect: detect every circle "
              "(labels only compared, in report.json).")] = "label",
 ) -> None:
@@ -506,12 +546,14 @@ def depth(
     images: Annotated[list[str], typer.Argument(
         help="Images, folders of images, videos or globs such as 'takes/*.mp4' (quoted).")],
     calibration: Annotated[Path, typer.Option(help="Calibration file from `vtsbench calibrate`.")],
-    solver: Annotated[str, typer.Option(help="Poisson solver: dct, dst or masked.")] = "dct",
+    solver: Annotated[str, _choice("dct", "dst", "masked",
+                                   help="Poisson solver: dct, dst or masked.")] = "dct",
     out: Annotated[Path, typer.Option(
         "--out", help="Output folder for <name>.npy (float32 mm) and <name>.png; with several "
                       "inputs, a folder's or video's maps go to OUT/<its name>/.")
     ] = Path("depth"),
-    device: Annotated[str, typer.Option(
+    device: Annotated[str, _choice(
+        "auto", "cpu", "cuda", "numpy",
         help="auto (CUDA when present, else numpy), cpu or cuda (torch), numpy.")] = "auto",
     batch: Annotated[int, typer.Option(min=1, help="Frames per step.")] = 8,
     range_: Annotated[str | None, typer.Option(
@@ -596,7 +638,8 @@ def leaderboard_add(
     part: Annotated[str, typer.Option(help="Part of the split.")] = "test",
     meta: Annotated[Path | None, typer.Option(help="Metadata JSON.")] = None,
     root: _ROOT = Path("leaderboards"),
-    replace: Annotated[bool, typer.Option(help="Replace the same submission's entry.")] = False,
+    replace: Annotated[bool, typer.Option(
+        "--replace", help="Replace the same submission's entry.")] = False,
 ) -> None:
     """Score a submission and store it (predictions included) as a leaderboard entry."""
     from .evaluation.leaderboard import add, render
@@ -620,7 +663,8 @@ def leaderboard_render(root: _ROOT = Path("leaderboards")) -> None:
 def leaderboard_rescore(
     dataset: Annotated[Path, typer.Option(help="The dataset the entries were scored on.")],
     root: _ROOT = Path("leaderboards"),
-    force: Annotated[bool, typer.Option(help="Re-score entries of the current metric version "
+    force: Annotated[bool, typer.Option(
+        "--force", help="Re-score entries of the current metric version "
                                             "too.")] = False,
 ) -> None:
     """Re-score stored entries whose metric version is not the current one, then re-render."""
@@ -640,11 +684,11 @@ def train(
     config: Annotated[Path | None, typer.Option(
         help="JSON or TOML file overriding keys of the recipe's default config.")] = None,
     seed: Annotated[int, typer.Option(min=0, help="Random seed.")] = 0,
-    device: Annotated[str, typer.Option(help="auto (CUDA when present), cpu, cuda, cuda:1...")
-    ] = "auto",
+    device: Annotated[str, _choice(
+        "auto", "cpu", "cuda", help="auto (CUDA when present), cpu, cuda, cuda:1...")] = "auto",
     resume: Annotated[bool, typer.Option(
         "--resume/--no-resume", help="Continue from the last checkpoint in --out.")] = True,
-    quiet: Annotated[bool, typer.Option(help="No progress bar.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
 ) -> None:
     """Train a recipe on a split's train part; prints the checkpoint path.
 
@@ -672,7 +716,7 @@ def predict(
     split: Annotated[str, typer.Option(help="Split scheme.")],
     out: Annotated[Path, typer.Option(help="Submission CSV to write (+ OUT.meta.json).")],
     part: Annotated[str, typer.Option(help="Part of the split to predict.")] = "test",
-    device: Annotated[str, typer.Option(help="auto, cpu, cuda...")] = "auto",
+    device: Annotated[str, _choice("auto", "cpu", "cuda", help="auto, cpu, cuda...")] = "auto",
     method: Annotated[str | None, typer.Option(
         help="Method name in the metadata (default: the recipe's name).")] = None,
     seed: Annotated[int, typer.Option(min=0, help="Training seed, for the metadata.")] = 0,
@@ -737,7 +781,8 @@ def collect(
                     "into entries.")] = 10,
     background: Annotated[Path | None, typer.Option(
         help="Background image file for a new session, instead of the median.")] = None,
-    kind: Annotated[str, typer.Option(help="sequence, static or press.")] = "sequence",
+    kind: Annotated[str, _choice("sequence", "static", "press",
+                                 help="sequence, static or press.")] = "sequence",
     window: Annotated[int, typer.Option(min=2, help="Frames per sequence window.")] = 8,
     stride: Annotated[int | None, typer.Option(
         min=1, help="Step between windows (default: --window).")] = None,
@@ -769,9 +814,11 @@ def collect(
         callback=_finite,
         help="Indentation increase (mm) over a window that makes a press (default 0.05).")
     ] = None,
-    append: Annotated[bool, typer.Option(help="Add a session or take to an existing OUT.")] = False,
-    overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
-    quiet: Annotated[bool, typer.Option(help="No progress bar.")] = False,
+    append: Annotated[bool, typer.Option(
+        "--append", help="Add a session or take to an existing OUT.")] = False,
+    overwrite: Annotated[bool, typer.Option(
+        "--overwrite", help="Replace OUT if it exists.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
 ) -> None:
     """Record a camera or a video file into a recordings folder, labelled from a motion log.
 

@@ -30,6 +30,10 @@ def install() -> None:
                 self.add_column(overflow="fold")
             for c in self.columns:
                 c.overflow = "fold"
+            for c, r in zip(self.columns, renderables, strict=False):  # names are never cut
+                plain = getattr(r, "plain", r if isinstance(r, str) else "")
+                if plain.startswith("-"):
+                    c.min_width = max(c.min_width or 0, *(len(w) for w in plain.split()))
             super().add_row(*renderables, **kw)
 
     def fix_linebreaks(paragraphs: list[str], markup_mode: Any) -> str:

@@ -14,11 +14,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .hub_layout import HUB_DIR, HubLayout, configs_yaml, default_config, size_category
+from .png import depth_preview_pngs, encode_png
 from .store import ARRAYS, DEPTH_SCALE_MM, KINDS, write_file
 
 if TYPE_CHECKING:
     from .build import Plan
-    from .hub import HubLayout
     from .schema import DatasetInfo
 
 #: Samples shown per kind (evenly spaced rows): full-size PNGs, so few for slip (T frames).
@@ -35,34 +36,13 @@ def preview_rows(n: int, k: int) -> list[int]:
     return sorted({round(float(x)) for x in np.linspace(0, n - 1, min(n, k))})
 
 
-def _png(img: np.ndarray, png_filter: str, huffman: bool = True) -> bytes:
-    """PNG bytes of an RGB uint8, grey uint8 or grey uint16 image (fixed settings).
-
-    Level 1 with one fixed row filter instead of libpng's per-row choice among all five, which
-    costs more than the compression (480x640, one core): RGB Huffman-only with the sub filter
-    7.3 ms (14.4 with the per-row choice; 3 % larger; sensor noise defeats LZ matching), depth
-    (16-bit) with the up filter 2.1 ms (4.8, and 1 % smaller), contact unfiltered 0.4 ms (1.7).
-    """
-    import cv2
-
-    filters = {"none": cv2.IMWRITE_PNG_FILTER_NONE, "sub": cv2.IMWRITE_PNG_FILTER_SUB,
-               "up": cv2.IMWRITE_PNG_FILTER_UP}
-    params = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_FILTER, filters[png_filter]]
-    if img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_RGB2BGR)
-        if huffman:  # huffman=False: LZ too, for smooth RGB (a colour-mapped depth)
-            params += [cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
-    ok, buf = cv2.imencode(".png", img, params)
-    if not ok:
-        raise ValueError("cannot encode PNG")
-    return buf.tobytes()
 
 
 def _frame_png(name: str, frame: np.ndarray) -> bytes:
     """One frame of an array as a PNG: RGB; contact as 0/255 (depth: frame_pngs)."""
     if name == "rgb":
-        return _png(frame, "sub")
-    return _png(frame.astype(np.uint8) * np.uint8(255), "none")
+        return encode_png(frame, "sub")
+    return encode_png(frame.astype(np.uint8) * np.uint8(255), "none")
 
 
 def preview_schema(kind: str, arrays: tuple[str, ...] = ARRAYS) -> Any:
@@ -97,10 +77,8 @@ def frame_pngs(name: str, sample: np.ndarray, sequence: bool) -> list[bytes]:
     """The PNGs of one sample of an array: one per frame of a slip sample, one for static.
 
     Depth (the stored int16 counts) is colour-mapped on one scale per sample
-    (hub.depth_preview_pngs): a 16-bit grey PNG of micrometres displayed all black."""
+    (png.depth_preview_pngs): a 16-bit grey PNG of micrometres displayed all black."""
     if name == "depth":
-        from .hub import depth_preview_pngs
-
         return depth_preview_pngs(sample.astype(np.float32) * np.float32(DEPTH_SCALE_MM))
     return [_frame_png(name, f) for f in sample] if sequence else [_frame_png(name, sample)]
 
@@ -159,8 +137,6 @@ def _configs(plan: Plan, hub: HubLayout | None = None) -> str:
     """The YAML `configs` list: the hub configs first when there is a hub copy (the first slip
     scheme is the default), then the indexes (the slip index is the default without a hub
     copy) and the previews."""
-    from .hub import configs_yaml, default_config
-
     lines = ["configs:"]
     if hub is not None:
         lines += configs_yaml(hub, default_config(hub))
@@ -191,8 +167,6 @@ def card_text(info: DatasetInfo, plan: Plan, hub: HubLayout | None = None,
               license: str = "unknown") -> str:
     """README.md: YAML header (license, task categories, size, configs) and a human
     description of the dataset; with `hub` (export-hf) its configs and how to load them."""
-    from .hub import size_category
-
     lay = plan.layouts
     t = info.frames_per_sequence
     h, w = info.resolution
@@ -303,8 +277,6 @@ def write_card(root: Path, info: DatasetInfo, plan: Plan) -> None:
 
 def _hub_section(info: DatasetInfo, hub: HubLayout) -> str:
     """The card's section on the parquet copy under hf/ and its configs."""
-    from .hub import HUB_DIR, default_config
-
     n_rows = {f.path: f.rows for fs in hub.files.values() for f in fs}
     rows = "\n".join(f"| `{name}` | {hub.kinds[name]} | "
                      f"{', '.join(f'{s} {sum(n_rows[p] for p in fs)}' for s, fs in splits.items())}"

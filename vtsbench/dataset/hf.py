@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import datasets
 
-from .loader import ITER_BYTES
+from .arrays import ITER_BYTES
 
 if TYPE_CHECKING:
     from .loader import View
@@ -57,7 +57,7 @@ def to_hf(view: View, arrays: Sequence[str] | None = None, *, copy: bool = False
     datasets.IterableDataset streamed from the Zarr store, or with copy=True a
     datasets.Dataset written offline under cache_dir."""
     arrays = view.arrays if arrays is None else tuple(arrays)
-    from .loader import check_arrays
+    from .arrays import check_arrays
 
     check_arrays(view.dataset.info, arrays)
     feats = features(view, arrays)

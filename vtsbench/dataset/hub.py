@@ -27,6 +27,8 @@ import numpy as np
 
 from ..errors import VtsError
 from ..labels import DIRECTION_NAMES, STATES
+from .hub_layout import HUB_DIR, HubFile, HubLayout
+from .png import depth_preview_pngs, png
 from .schema import INDEX_COLUMNS, INFO_PATH, KINDS
 
 if TYPE_CHECKING:
@@ -34,15 +36,11 @@ if TYPE_CHECKING:
 
     from .loader import View, VtsDataset
 
-#: Folder of the parquet files, relative to the dataset.
-HUB_DIR = "hf"
 #: Encoded bytes per row group (the Hub viewer reads one row group at a time) and per file.
 ROW_GROUP_BYTES = 16 * 2**20
 FILE_BYTES = 256 * 2**20
 #: Parts of a split scheme -> split names of `datasets` (train, validation, test; folds as is).
 SPLIT_NAMES = {"val": "validation"}
-#: The depth preview maps 0 .. max(this, the sample's maximum) mm to the viridis colour map.
-PREVIEW_MIN_RANGE_MM = 0.05
 #: Index columns written as they are (the labels with names are ClassLabel columns).
 PLAIN_COLUMNS = ("sample_id", "row", "session", "sensor", "mm_per_px_x", "mm_per_px_y",
                  "press_depth_mm", "contact_x_px", "contact_y_px")
@@ -60,51 +58,6 @@ def split_name(part: str) -> str:
     character datasets refuses in a split name (not a letter, digit or _) becomes _."""
     return re.sub(r"\W", "_", SPLIT_NAMES.get(part, part), flags=re.ASCII)
 
-
-def size_category(n: int) -> str:
-    """The Hub's size_categories value for n rows."""
-    for limit, name in ((1_000, "n<1K"), (10_000, "1K<n<10K"), (100_000, "10K<n<100K"),
-                        (1_000_000, "100K<n<1M"), (10_000_000, "1M<n<10M")):
-        if n < limit:
-            return name
-    return "n>10M"
-
-
-# -- images --------------------------------------------------------------------------------
-
-
-def png(img: np.ndarray, smooth: bool = False) -> bytes:
-    """PNG bytes of an RGB or grey uint8 image, fixed settings (level 1, one row filter; see
-    card._png for the measurements): sensor frames Huffman only with the sub filter (their
-    noise defeats LZ matching); smooth=True (colour-mapped depth) LZ with the up filter, which
-    shrinks large flat areas to almost nothing."""
-    from .card import _png
-
-    return _png(img, "up" if smooth else "sub", huffman=not smooth)
-
-
-def depth_range_mm(depth_mm: np.ndarray) -> float:
-    """The top of a sample's preview colour scale: its maximum depth, at least
-    PREVIEW_MIN_RANGE_MM (an untouched gel is not blown up into colour noise)."""
-    top = float(np.max(depth_mm)) if depth_mm.size else 0.0
-    return max(PREVIEW_MIN_RANGE_MM, top if np.isfinite(top) else 0.0)
-
-
-def depth_colour(depth_mm: np.ndarray, top_mm: float) -> np.ndarray:
-    """An RGB uint8 image of one depth frame: 0 .. top_mm mm on viridis (negatives as 0)."""
-    import cv2
-
-    level = np.clip(np.asarray(depth_mm, np.float32) * np.float32(255.0 / top_mm), 0, 255)
-    bgr = cv2.applyColorMap(level.astype(np.uint8), cv2.COLORMAP_VIRIDIS)
-    return np.ascontiguousarray(bgr[..., ::-1])
-
-
-def depth_preview_pngs(depth_mm: np.ndarray) -> list[bytes]:
-    """Colour-mapped PNGs of a sample's depth (one per frame; one for a static sample), on one
-    scale for the whole sample."""
-    frames = depth_mm if depth_mm.ndim == 3 else depth_mm[None]
-    top = depth_range_mm(frames)
-    return [png(depth_colour(f, top), smooth=True) for f in frames]
 
 
 # -- schema --------------------------------------------------------------------------------
@@ -213,16 +166,6 @@ def cells(ds: VtsDataset, kind: str) -> list[Cell]:
 
 
 # -- writing -------------------------------------------------------------------------------
-
-
-@dataclass
-class HubFile:
-    """One written parquet file: its path (relative to the dataset), cell and rows."""
-
-    path: str
-    cell: int
-    rows: int
-    nbytes: int
 
 
 def _label_columns(view: View, kind: str) -> dict[str, pa.Array]:
@@ -404,18 +347,6 @@ def _view_at(ds: VtsDataset, kind: str, positions: np.ndarray) -> View:
 # -- configs -------------------------------------------------------------------------------
 
 
-@dataclass
-class HubLayout:
-    """What export wrote: the files of each kind and, per config, split -> files."""
-
-    files: dict[str, list[HubFile]]
-    configs: dict[str, dict[str, list[str]]]
-    kinds: dict[str, str]  # config -> kind
-
-    def nbytes(self) -> int:
-        return sum(f.nbytes for fs in self.files.values() for f in fs)
-
-
 def hub_configs(ds: VtsDataset, files: dict[str, list[HubFile]]
                 ) -> tuple[dict[str, dict[str, list[str]]], dict[str, str]]:
     """Per config (`<kind>_all` and one per scheme), split -> the files of its samples."""
@@ -435,26 +366,6 @@ def hub_configs(ds: VtsDataset, files: dict[str, list[HubFile]]
         configs[f"{kind}_all"] = {"full": [f.path for f in files[kind]]}
         kinds[f"{kind}_all"] = kind
     return configs, kinds
-
-
-def configs_yaml(layout: HubLayout, default: str | None) -> list[str]:
-    """YAML lines of the hub configs (to go under `configs:`)."""
-    lines = []
-    for name, splits in layout.configs.items():
-        lines += [f"- config_name: {name}", "  data_files:"]
-        for split, paths in splits.items():
-            lines += [f"  - split: {split}", "    path:"]
-            lines += [f"    - {p}" for p in paths]
-        if name == default:
-            lines.append("  default: true")
-    return lines
-
-
-def default_config(layout: HubLayout) -> str | None:
-    """The config the Hub shows first: slip_unseen_objects (the headline benchmark), else the
-    first config."""
-    names = list(layout.configs)
-    return "slip_unseen_objects" if "slip_unseen_objects" in names else (names or [None])[0]
 
 
 # -- export --------------------------------------------------------------------------------

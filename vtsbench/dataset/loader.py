@@ -20,6 +20,7 @@ from zarr.storage import WrapperStore
 
 from ..errors import VtsError
 from . import store
+from .arrays import ITER_BYTES, check_arrays
 from .schema import INFO_PATH, KINDS, DatasetInfo, SplitFile, index_schema_of, load_info
 from .splits import read_split
 
@@ -29,8 +30,6 @@ if TYPE_CHECKING:
     import torch.utils.data
 
 ARRAYS = store.ARRAYS
-#: Bytes of decoded arrays read per call while iterating over a view.
-ITER_BYTES = 64 * 2**20
 
 
 class SampleIndexError(VtsError, IndexError):
@@ -261,16 +260,6 @@ class KindStore:
             out[n] = data
         return out
 
-
-def check_arrays(info: DatasetInfo, names: Sequence[str], what: str = "") -> None:
-    """A one-line error for an array name the dataset does not hold (depth and contact in a
-    dataset built with --no-depth); `what` says what asked for it."""
-    for n in names:
-        if n not in ARRAYS:
-            raise VtsError(f"unknown array {n!r}; arrays are {', '.join(ARRAYS)}")
-        if n not in info.arrays:
-            raise VtsError(f"{what or 'reading ' + repr(n)} needs the {n} array, and this dataset "
-                           f"has none (built with --no-depth: {', '.join(info.arrays)} only)")
 
 
 def _read_runs(arr: Any, runs: list[tuple[int, int]], n: int,

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import VtsError
-from .hub import HUB_DIR
+from .hub_layout import HUB_DIR
 
 #: Never uploaded: hidden files (partial writes, caches) and build leftovers.
 IGNORE = (".*", "**/.*", "**/*.tmp")

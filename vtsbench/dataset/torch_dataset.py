@@ -98,7 +98,7 @@ class TorchView(Dataset):
         t = view.dataset.info.frames_per_sequence
         self.frames = None if frames is None else frame_numbers(t, int(frames))
         inputs = {"rgb": ("rgb",), "depth": ("depth",), "rgbd": ("rgb", "depth")}[modality]
-        from .loader import check_arrays
+        from .arrays import check_arrays
 
         check_arrays(view.dataset.info, inputs, f"modality {modality!r}")
         for name in self.targets:
