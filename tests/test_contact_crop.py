@@ -85,7 +85,7 @@ def test_dihedral_labels_follow_the_frames(dx: float, dy_rows: float) -> None:
 def test_crop_flow_follows_the_motion() -> None:
     import cv2
 
-    from vtsbench.models.contact_crop import FLOW_SCALE_PX, crop_flow
+    from vtsbench.models.contact_crop import FLOW_SOFT_PX, crop_flow
 
     seq = moving_blob(6, -3, h=64, w=64, at=(30, 34))
     grey = np.stack([cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for f in seq])
@@ -96,7 +96,8 @@ def test_crop_flow_follows_the_motion() -> None:
     mag = np.hypot(f[-1, 0], f[-1, 1])
     fx, fy = f[-1, 0][mag > 0.5 * mag.max()].mean(), f[-1, 1][mag > 0.5 * mag.max()].mean()
     assert angle_to_class(math.degrees(math.atan2(-fy, fx)) % 360) == 1
-    assert 0.5 < mag.max() * FLOW_SCALE_PX < 4.0
+    px = FLOW_SOFT_PX * np.arctanh(min(float(mag.max()), 0.999999))  # back to pixels
+    assert 0.5 < px < 4.0 and mag.max() < 1.0
     x, _ = contact_crop({"rgb": seq}, 40, 20, "rgb", flow=True)
     assert x.shape == (4, 5, 20, 20)
 

@@ -62,17 +62,26 @@ def crop_sequence(frames: np.ndarray, box: tuple[int, int, int], size: int) -> n
     return np.stack(out)
 
 
-#: Flow channels are in pixels at the model's input divided by this, then clipped to [-1, 1]:
-#: large enough that a slip of the simulator (at most 1.5 mm, 12.5 px at a 256-pixel crop
-#: resized to 64) is not clipped, whose angle clipping both axes would bend (4 px: 65 % unseen
-#: objects direction, 92 % of the errors adjacent).
-FLOW_SCALE_PX = 16.0
+#: Flow channels: each flow vector, in pixels at the model's input, keeps its angle and has its
+#: length compressed to tanh(length / FLOW_SOFT_PX) (`compress_flow`). The earlier linear
+#: scaling (divided by 16 px, clipped to [-1, 1]) left a 0.08 mm slip (0.7 px at a 256-pixel
+#: crop resized to 64) at 0.04, lost beside frames of unit range, and per-axis clipping bends
+#: a large slip's angle towards the diagonal; the soft radial compression does neither.
+FLOW_SOFT_PX = 2.0
+
+
+def compress_flow(f: np.ndarray, soft_px: float = FLOW_SOFT_PX) -> np.ndarray:
+    """(..., 2, H, W) flow in pixels -> the same angles, lengths tanh(length / soft_px) in
+    [0, 1): small slips readable, large ones unclipped in angle."""
+    mag = np.hypot(f[..., 0, :, :], f[..., 1, :, :])[..., None, :, :]
+    gain = np.where(mag > 1e-6, np.tanh(mag / soft_px) / np.maximum(mag, 1e-6), 1.0 / soft_px)
+    return (f * gain).astype(np.float32)
 
 
 def crop_flow(grey: np.ndarray, size: int) -> np.ndarray:
     """(T, 2, size, size) float32: DIS optical flow (OpenCV, `medium` preset) from the first
-    frame to each frame of a (T, S, S) uint8 crop, resized to size and expressed in pixels at
-    that size over FLOW_SCALE_PX, clipped to [-1, 1] (x right, y down the rows). Frame 0: 0."""
+    frame to each frame of a (T, S, S) uint8 crop, resized to size, in pixels at that size,
+    radially compressed (`compress_flow`; x right, y down the rows). Frame 0: 0."""
     import cv2
 
     dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
@@ -81,7 +90,7 @@ def crop_flow(grey: np.ndarray, size: int) -> np.ndarray:
     for t in range(1, len(grey)):
         f = dis.calc(grey[0], grey[t], None)
         f = cv2.resize(f, (size, size), interpolation=cv2.INTER_AREA) * (size / side)
-        out[t] = np.clip(f.transpose(2, 0, 1) / FLOW_SCALE_PX, -1.0, 1.0)
+        out[t] = compress_flow(f.transpose(2, 0, 1))
     return out
 
 
