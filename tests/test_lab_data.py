@@ -374,6 +374,24 @@ def test_progress_lines_when_not_a_terminal() -> None:
     assert lines[0].startswith("frames: 1/4 (25 %)") and lines[-1].startswith("frames: 4/4")
 
 
+def test_every_long_command_gets_lines_off_a_terminal(capsys) -> None:
+    """The one progress factory (training, recipes, simulate, collect, verify, export) gives
+    lines when stderr is not a terminal, with rich's update/start/stop."""
+    from vtsbench.progress import LineProgress, progress_bar
+    from vtsbench.recipes import progress_iter
+
+    bar = progress_bar()
+    assert isinstance(bar, LineProgress)
+    bar.every_s = 0.0
+    bar.start()
+    t = bar.add_task("training", total=3)
+    bar.update(t, completed=2, description="training loss 0.5")
+    bar.stop()
+    assert list(progress_iter(range(3), 3, "predict")) == [0, 1, 2]
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("training loss 0.5: 2/3") and err[-1].startswith("predict: 3/3")
+
+
 def test_check_prints_progress_lines(make_recordings, capsys) -> None:
     from vtsbench.recordings.check import check_folder
 

@@ -276,7 +276,6 @@ class _Recording:
 
 
 def _progress(enabled: bool):
-    from rich.console import Console
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -285,9 +284,12 @@ def _progress(enabled: bool):
         TimeElapsedColumn,
     )
 
-    return Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-                    TimeElapsedColumn(), console=Console(stderr=True), disable=not enabled,
-                    transient=False)
+    from .progress import progress_bar
+
+    if not enabled:
+        return Progress(disable=True)
+    return progress_bar(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+                        TimeElapsedColumn(), transient=False)
 
 
 def _record(cap: media.Capture, take_dir: Path, plan: _Plan, progress: bool) -> _Recording:

@@ -44,6 +44,22 @@ class LineProgress:
                            "start_done": completed, "t0": now, "last": now, "printed": None})
         return len(self.tasks) - 1
 
+    def start(self) -> None:
+        """Nothing to start (rich's Progress starts its live display here)."""
+
+    def stop(self) -> None:
+        """The last line of every task not yet printed at its end."""
+        self.__exit__()
+
+    def update(self, task: int, completed: float | None = None,
+               description: str | None = None, **_: Any) -> None:
+        """Set a task's count and description (rich's update); prints as advance does."""
+        t = self.tasks[task]
+        if description is not None:
+            t["desc"] = description
+        if completed is not None:
+            self.advance(task, completed - t["done"])
+
     def advance(self, task: int, advance: float = 1) -> None:
         t = self.tasks[task]
         t["done"] += advance
@@ -65,3 +81,15 @@ class LineProgress:
             if total and done < total:
                 text += f", about {(total - done) / rate:.0f} s left"
         print(text, file=self.stream if self.stream is not None else sys.stderr, flush=True)
+
+
+def progress_bar(*columns: Any, transient: bool = True, **kwargs: Any) -> Any:
+    """The progress display of a long command, on stderr: rich's live bar (with these columns)
+    on a terminal, `LineProgress` lines anywhere else. Both have add_task, advance, update,
+    start, stop and work as context managers."""
+    if not is_terminal():
+        return LineProgress()
+    from rich.console import Console
+    from rich.progress import Progress
+
+    return Progress(*columns, console=Console(stderr=True), transient=transient, **kwargs)

@@ -250,14 +250,14 @@ def _version() -> str:
 
 def progress_iter(items: Iterable[Any], total: int, label: str, enabled: bool = True
                   ) -> Iterable[Any]:
-    """Iterate with a rich progress bar (on stderr) when enabled."""
+    """Iterate with a progress display on stderr when enabled (a bar on a terminal, lines
+    otherwise)."""
     if not enabled:
         yield from items
         return
-    from rich.console import Console
-    from rich.progress import Progress
+    from .progress import progress_bar
 
-    with Progress(console=Console(stderr=True), transient=True) as bar:
+    with progress_bar() as bar:
         task = bar.add_task(label, total=total)
         for item in items:
             yield item

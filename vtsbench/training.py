@@ -315,10 +315,9 @@ def train_loop(model: torch.nn.Module, loss_fn: LossFn, dataset: Any, out_dir: s
     losses: list[float] = []
     bar = None
     if progress and rank == 0:
-        from rich.console import Console
-        from rich.progress import Progress
+        from .progress import progress_bar
 
-        bar = Progress(console=Console(stderr=True), transient=True)
+        bar = progress_bar()
         bar.start()
         task = bar.add_task("training", total=cfg.steps, completed=start)
     net.train()

@@ -433,9 +433,9 @@ class _progress:
     def __enter__(self) -> Callable[[int], None]:
         if not self.on:
             return lambda _n: None
-        from rich.progress import Progress
+        from ..progress import progress_bar
 
-        self.bar = Progress(transient=True)
+        self.bar = progress_bar()
         self.bar.__enter__()
         task = self.bar.add_task("samples", total=self.total)
         return lambda n: self.bar.advance(task, n)

@@ -297,8 +297,9 @@ def _bar(enabled: bool) -> Any:
 
     if not enabled:
         return nullcontext(None)
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress
+    from rich.progress import BarColumn, MofNCompleteColumn
 
-    return Progress("[progress.description]{task.description}", BarColumn(),
-                    MofNCompleteColumn(), console=Console(stderr=True), transient=True)
+    from ..progress import progress_bar
+
+    return progress_bar("[progress.description]{task.description}", BarColumn(),
+                        MofNCompleteColumn())

@@ -161,10 +161,12 @@ def _run_jobs(jobs: list[Job], workers: int, progress: bool) -> list[Entry]:
     results: list[Entry | None] = [None] * len(jobs)
     bar_cm = nullcontext(None)
     if progress:
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+        from rich.progress import BarColumn, MofNCompleteColumn, TimeRemainingColumn
 
-        bar_cm = Progress("[progress.description]{task.description}", BarColumn(),
-                          MofNCompleteColumn(), TimeRemainingColumn(), transient=False)
+        from ..progress import progress_bar
+
+        bar_cm = progress_bar("[progress.description]{task.description}", BarColumn(),
+                              MofNCompleteColumn(), TimeRemainingColumn(), transient=False)
     with bar_cm as bar:
         task = bar.add_task("simulating", total=len(jobs)) if bar is not None else None
         if workers == 1 or len(jobs) <= 1:
