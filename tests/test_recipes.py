@@ -128,6 +128,11 @@ def test_cli_train_predict_eval_with_a_file_recipe(vts_dataset: Path, toy_file: 
                               str(cfg), "--quiet"])
     assert res.exit_code == 0, res.output
     assert json.loads((tmp_path / "run" / "config.json").read_text())["state"] == "static"
+    # a failed train (here a split the dataset does not have) leaves no run folder behind
+    res = runner.invoke(app, ["train", "flow", "--dataset", str(vts_dataset), "--split",
+                              "no_such_split", "--out", str(tmp_path / "failed"), "--quiet"])
+    assert res.exit_code == 2, res.output
+    assert not (tmp_path / "failed").exists()
     sub = tmp_path / "toy.csv"
     res = runner.invoke(app, ["predict", str(toy_file), str(tmp_path / "run" / "toy.json"),
                               "--dataset", str(vts_dataset), "--split", "unseen_objects",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -697,14 +698,25 @@ def train(
     """
     import json
 
+    from .atomic import write_text_atomic
     from .recipes import load_config, load_recipe
 
     rec = _run(load_recipe, recipe)
     cfg = _run(load_config, rec, config)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "config.json").write_text(json.dumps(cfg, indent=1, sort_keys=True) + "\n")
-    ckpt = _run(rec.train, dataset, split, out, cfg, seed=seed, device=device, resume=resume,
-                progress=not quiet)
+    existed = out.exists()
+    _run(out.mkdir, parents=True, exist_ok=True)
+    try:
+        ckpt = _run(rec.train, dataset, split, out, cfg, seed=seed, device=device,
+                    resume=resume, progress=not quiet)
+    except BaseException:
+        # a run that failed before its first checkpoint leaves no folder behind (one that has
+        # checkpoints keeps them, so that the next train resumes)
+        if not existed:
+            with contextlib.suppress(OSError):
+                out.rmdir()
+        raise
+    # the merged config, written once the run succeeded: a config.json marks a finished run
+    write_text_atomic(out / "config.json", json.dumps(cfg, indent=1, sort_keys=True) + "\n")
     typer.echo(f"trained {rec.name} on {split}/train: checkpoint {ckpt}")
 
 
