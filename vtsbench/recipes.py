@@ -39,10 +39,17 @@ class Recipe:
       return its path. With `resume`, continue from the last checkpoint found in out_dir.
     - `predict(checkpoint, dataset_path, split, part, *, device)`: a list of submission rows
       (dicts with `sample_id`, `task`, `pred` and optional `score_k`) for every sample of part.
+    - optional, read by `vtsbench predict` into the submission's metadata: `latency_s` (seconds
+      per sample of the last predict) and `input_scale_xy` (model-input pixels per sensor pixel,
+      x and y, of the last predict; the per-distance scores give pixels at the model's input).
     """
 
     name: str = "recipe"
     tasks: tuple[str, ...] = ()
+
+    def __init__(self) -> None:
+        self.latency_s: list[float] = []
+        self.input_scale_xy: tuple[float, float] | None = None
 
     def default_config(self) -> dict[str, Any]:
         return {}

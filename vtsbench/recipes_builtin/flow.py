@@ -207,12 +207,6 @@ class FlowRecipe(Recipe):
     name = "flow"
     tasks = ("state", "direction")
 
-    def __init__(self) -> None:
-        #: seconds per sequence spent in flow + features + classification by the last predict
-        self.latency_s: list[float] = []
-        #: pixels at which the direction is measured per sensor pixel (x, y), last predict
-        self.input_scale_xy: tuple[float, float] | None = None
-
     def default_config(self) -> dict[str, Any]:
         return {"preset": "fast", "scale": 1.0, "max_depth": 3, "fit_parts": ["train"],
                 "direction": "phase", "shift_scale": 1.0, "shift_slope": False}

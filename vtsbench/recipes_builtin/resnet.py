@@ -78,10 +78,6 @@ class ResnetRecipe(Recipe):
     name = "resnet"
     tasks = ("object",)
 
-    def __init__(self) -> None:
-        #: seconds of forward pass per image measured by the last predict
-        self.latency_s: list[float] = []
-
     def default_config(self) -> dict[str, Any]:
         return {
             "arch": "resnet50",         # resnet50 (the paper's) | resnet18 (CPU-sized)

@@ -123,12 +123,6 @@ class TimesformerRecipe(Recipe):
     name = "timesformer"
     tasks = ("state", "direction")
 
-    def __init__(self) -> None:
-        #: seconds of forward pass per sequence measured by the last predict
-        self.latency_s: list[float] = []
-        #: model-input pixels per sensor pixel (x, y) of the last predict
-        self.input_scale_xy: tuple[float, float] | None = None
-
     def default_config(self) -> dict[str, Any]:
         return {
             "config": "small",          # small | paper
