@@ -98,8 +98,10 @@ def test_crop_flow_follows_the_motion() -> None:
     assert angle_to_class(math.degrees(math.atan2(-fy, fx)) % 360) == 1
     px = FLOW_SOFT_PX * np.arctanh(min(float(mag.max()), 0.999999))  # back to pixels
     assert 0.5 < px < 4.0 and mag.max() < 1.0
-    x, _ = contact_crop({"rgb": seq}, 40, 20, "rgb", flow=True)
+    x, _ = contact_crop({"rgb": seq}, 40, 20, "rgb", flow="dis")
     assert x.shape == (4, 5, 20, 20)
+    with pytest.raises(ValueError, match="flow must be"):
+        contact_crop({"rgb": seq}, 40, 20, "rgb", flow="tvl1")
 
 
 def test_pretrained_filters_of_extra_channels_start_at_zero() -> None:
@@ -140,3 +142,59 @@ def test_dihedral_turns_flow_vectors_with_the_frames() -> None:
     assert len(set(d.tolist())) > 3
     for xi, di in zip(out, d, strict=True):
         assert _vec_dir(xi[-1, 3:]) == int(di) == flow_dir(xi[:, :3])
+
+
+def moving_bar(dx: float, dy_rows: float, t: int = 5, h: int = 96, w: int = 128) -> np.ndarray:
+    """(T, H, W, 3) uint8: a long textured bar (an elongated imprint) moving by (dx, dy_rows)."""
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    out = []
+    for k in range(t):
+        cx, cy = 60 + dx * k / (t - 1), 48 + dy_rows * k / (t - 1)
+        inside = (np.abs(xs - cx) < 40) & (np.abs(ys - cy) < 6)
+        tex = 0.5 + 0.5 * np.sin(0.8 * (xs - cx) + 0.3 * (ys - cy))
+        img = np.where(inside, 70 + 140 * tex, 40)
+        out.append(np.repeat(img[..., None], 3, axis=2).astype(np.uint8))
+    return np.stack(out)
+
+
+@pytest.mark.parametrize("dx,dy", [(8.0, 0.0), (-6.0, 6.0), (0.0, -7.0), (3.0, 0.0)])
+def test_shift_field_holds_the_displacement_where_the_gel_moves(dx: float, dy: float) -> None:
+    import cv2
+
+    from vtsbench.models.motion import shift_field
+
+    seq = moving_bar(dx, dy)
+    grey = np.stack([cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for f in seq])
+    f = shift_field(grey)
+    assert f.shape == (5, 2, 96, 128) and f.dtype == np.float32 and not f[0].any()
+    peak = np.unravel_index(np.hypot(f[-1, 0], f[-1, 1]).argmax(), f.shape[2:])
+    assert f[-1, 0][peak] == pytest.approx(dx, abs=0.5)
+    assert f[-1, 1][peak] == pytest.approx(dy, abs=0.5)
+    assert not f[-1, :, 0, 0].any() and not f[-1, :, -1, -1].any()  # still corners stay 0
+    # each frame's field grows with its share of the motion
+    lengths = [float(np.hypot(*f[t, :, peak[0], peak[1]])) for t in range(5)]
+    assert lengths == sorted(lengths)
+
+
+def test_shift_field_is_zero_without_motion_and_for_one_frame() -> None:
+    from vtsbench.models.motion import shift_field
+
+    still = np.full((4, 32, 32), 90, np.uint8)
+    assert not shift_field(still).any()
+    assert not shift_field(still[:1]).any()
+
+
+def test_shift_channels_follow_the_motion_of_an_elongated_imprint() -> None:
+    # sliding along its own length: the dense flow sees little of it (aperture), the shift
+    # channels the whole displacement, in pixels at the model's input, compressed
+    from vtsbench.models.contact_crop import FLOW_SOFT_PX
+
+    seq = moving_bar(10.0, 0.0)
+    x, (sx, _) = contact_crop({"rgb": seq}, 96, 48, "rgb", flow="shift")
+    assert x.shape == (5, 5, 48, 48)
+    f = x[-1, 3:]
+    mag = np.hypot(f[0], f[1])
+    fx, fy = f[0][mag > 0.5 * mag.max()].mean(), f[1][mag > 0.5 * mag.max()].mean()
+    assert angle_to_class(math.degrees(math.atan2(-fy, fx)) % 360) == 0
+    px = FLOW_SOFT_PX * np.arctanh(min(float(mag.max()), 0.999999))
+    assert px == pytest.approx(10.0 * sx, abs=0.5)

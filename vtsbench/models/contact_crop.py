@@ -94,14 +94,31 @@ def crop_flow(grey: np.ndarray, size: int) -> np.ndarray:
     return out
 
 
+FLOWS = ("dis", "shift")
+
+
+#: Side (sensor px) of the square around the contact where the `shift` channels are measured:
+#: the whole moving imprint, also when it is larger than the model's crop. On the demo's
+#: slipping sequences (unseen_objects, train / test) the phase correlation of the first and last
+#: frame bins right 96 / 84 % at a 256 px square, 96 / 95 % at 384, 97 / 97 % at 480.
+MOTION_PX = 480
+
+
 def contact_crop(sample: dict[str, Any], crop_px: int, size: int, modality: str,
-                 flow: bool = False) -> tuple[np.ndarray, tuple[float, float]]:
+                 flow: str | None = None) -> tuple[np.ndarray, tuple[float, float]]:
     """A sample's sequence cut around its contact: (T, C, size, size) float32 (rgb in [0, 1],
-    then depth in mm for rgbd; depth alone for depth; with `flow`, two more channels: the
-    optical flow from the first frame, `crop_flow`) and the model-input pixels per sensor
-    pixel (x, y)."""
+    then depth in mm for rgbd; depth alone for depth; with `flow`, two more channels of motion
+    from the first frame: `shift`, the phase-correlation displacement of the moving gel drawn
+    over where it moves (`vtsbench.models.motion.shift_field`), or `dis`, the dense DIS optical
+    flow of the crop (`crop_flow`), both in pixels at the model's input, radially compressed)
+    and the model-input pixels per sensor pixel (x, y)."""
+    import cv2
+
+    if flow not in (None, *FLOWS):
+        raise ValueError(f"flow must be one of {FLOWS} or None, not {flow!r}")
     rgb = sample["rgb"]
-    box = crop_box(crop_center(rgb, sample.get("contact")), crop_px, rgb.shape[1:3])
+    center = crop_center(rgb, sample.get("contact"))
+    box = crop_box(center, crop_px, rgb.shape[1:3])
     parts = []
     if modality in ("rgb", "rgbd"):
         parts.append(crop_sequence(rgb, box, size).astype(np.float32).transpose(0, 3, 1, 2)
@@ -109,17 +126,25 @@ def contact_crop(sample: dict[str, Any], crop_px: int, size: int, modality: str,
     if modality in ("depth", "rgbd"):
         d = crop_sequence(np.asarray(sample["depth"], dtype=np.float32), box, size)
         parts.append(d[:, None])
+    scale = size / box[2]
     if flow:
-        import cv2
-
         if modality == "depth":  # the depth maps as grey levels (0 to the deepest point)
-            d = crop_sequence(np.asarray(sample["depth"], dtype=np.float32), box, box[2])
+            d = np.asarray(sample["depth"], dtype=np.float32)
             grey = np.clip(255 * d / max(float(d.max()), 1e-6), 0, 255).astype(np.uint8)
         else:
-            grey = np.stack([cv2.cvtColor(f, cv2.COLOR_RGB2GRAY)
-                             for f in crop_sequence(rgb, box, box[2])])
-        parts.append(crop_flow(grey, size))
-    scale = size / box[2]
+            grey = np.stack([cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for f in rgb])
+        if flow == "dis":
+            parts.append(crop_flow(crop_sequence(grey, box, box[2]), size))
+        else:
+            from vtsbench.models.motion import shift_field
+
+            # the square holds `box` (the same centre, larger, both inside the frame)
+            x0, y0, side = crop_box(center, max(MOTION_PX, crop_px), rgb.shape[1:3])
+            field = np.zeros((len(grey), grey.shape[1], grey.shape[2], 2), np.float32)
+            field[:, y0:y0 + side, x0:x0 + side] = shift_field(
+                grey[:, y0:y0 + side, x0:x0 + side]).transpose(0, 2, 3, 1)  # sensor px
+            cut = crop_sequence(field, box, size).transpose(0, 3, 1, 2)
+            parts.append(compress_flow(cut * scale))
     return np.concatenate(parts, axis=1), (scale, scale)
 
 

@@ -185,9 +185,13 @@ def _resize_embedding(emb: torch.Tensor, shape, has_cls: bool) -> torch.Tensor:
 class DualHeadTimesformer(nn.Module):
     """TimeSformer backbone with a state head (3 classes) and a direction head (8 classes).
 
-    Both heads are linear layers on the final layer-normalised CLS token; the direction head
-    is trained only on slip samples (see ``masked_joint_loss``).
+    Both heads are linear layers on the final layer-normalised tokens: the CLS token alone
+    (``pool="cls"``, the original TimeSformer classifier) or the CLS token beside the mean of
+    the patch tokens (``pool="cls+mean"``). The direction head is trained only on slip samples
+    (see ``masked_joint_loss``).
     """
+
+    POOLS = ("cls", "cls+mean")
 
     def __init__(
         self,
@@ -195,10 +199,14 @@ class DualHeadTimesformer(nn.Module):
         num_states: int = NUM_STATES,
         num_directions: int = NUM_DIRECTIONS,
         head_dropout: float = 0.0,
+        pool: str = "cls",
     ) -> None:
         super().__init__()
+        if pool not in self.POOLS:
+            raise VtsError(f"pool must be one of {', '.join(self.POOLS)}, not {pool!r}")
         self.backbone = backbone
-        hidden = backbone.config.hidden_size
+        self.pool = pool
+        hidden = backbone.config.hidden_size * (2 if pool == "cls+mean" else 1)
         self.dropout = nn.Dropout(head_dropout)
         self.state_head = nn.Linear(hidden, num_states)
         self.direction_head = nn.Linear(hidden, num_directions)
@@ -220,6 +228,7 @@ class DualHeadTimesformer(nn.Module):
         cache_dir: str | Path | None = None,
         with_delta: bool = False,
         extra_channels: int = 0,
+        pool: str = "cls",
     ) -> DualHeadTimesformer:
         """Build a named configuration (``paper`` or ``small``) for a modality.
 
@@ -228,7 +237,8 @@ class DualHeadTimesformer(nn.Module):
         absent) and to False for ``small`` unless ``pretrained_path`` is given.
         ``image_size`` and ``num_frames`` override the configuration's (tests use 32x32).
         ``with_delta``: twice the modality's channels, frames and their differences;
-        ``extra_channels``: more input channels after those (2 for optical flow).
+        ``extra_channels``: more input channels after those (2 for optical flow);
+        ``pool``: what the heads read (``cls`` or ``cls+mean``, see the class).
         """
         config = backbone_config(
             name, modality, image_size=image_size, num_frames=num_frames, dropout=dropout,
@@ -242,7 +252,7 @@ class DualHeadTimesformer(nn.Module):
             from transformers import TimesformerModel
 
             backbone = TimesformerModel(config)
-        return cls(backbone, head_dropout=dropout)
+        return cls(backbone, head_dropout=dropout, pool=pool)
 
     @property
     def config(self):
@@ -256,8 +266,11 @@ class DualHeadTimesformer(nn.Module):
         if x.shape[2] != self.config.num_channels:
             raise ValueError(f"expected {self.config.num_channels} channels, got {x.shape[2]}")
         hidden = self.backbone(pixel_values=x).last_hidden_state
-        cls_token = self.dropout(hidden[:, 0])
-        return self.state_head(cls_token), self.direction_head(cls_token)
+        feat = hidden[:, 0]
+        if self.pool == "cls+mean":
+            feat = torch.cat([feat, hidden[:, 1:].mean(dim=1)], dim=1)
+        feat = self.dropout(feat)
+        return self.state_head(feat), self.direction_head(feat)
 
 
 def masked_joint_loss(

@@ -26,6 +26,7 @@ import numpy as np
 
 from vtsbench.errors import VtsError
 from vtsbench.labels import N_DIRECTIONS, STATES, angle_to_class
+from vtsbench.models.motion import motion_window, shift_scale
 from vtsbench.recipes import Recipe, progress_iter
 
 FEATURES = ("mag_mean", "mag_p90", "net", "coherence", "div_mean", "div_abs", "mag_late_ratio",
@@ -58,38 +59,6 @@ def sequence_flow(frames: np.ndarray, preset: str = "fast", scale: float = 1.0) 
     g = _gray(frames, scale)
     flows = [dis.calc(g[k], g[k + 1], None) for k in range(len(g) - 1)]
     return np.stack(flows) / scale
-
-
-def motion_window(gray: list[np.ndarray], level: float = 4.0, sigma: float = 3.0
-                  ) -> np.ndarray | None:
-    """Where the gel moves: a smooth window (float32, peak 1) over the pixels whose grey level
-    changes by more than `level` against the first frame at some time (blurred by `sigma` px,
-    dilated by a quarter of the moving region's size), times a Hanning window against edge
-    effects. None when nothing moves."""
-    import cv2
-
-    g = np.stack(gray).astype(np.float32)
-    change = cv2.GaussianBlur(np.abs(g[1:] - g[:1]).max(axis=0), (0, 0), sigma)
-    mask = (change > level).astype(np.float32)
-    if not mask.any():
-        return None
-    ys, xs = np.nonzero(mask)
-    k = max(3, int(0.25 * max(np.ptp(xs), np.ptp(ys))) | 1)
-    mask = cv2.dilate(mask, np.ones((k, k), np.uint8))
-    mask = cv2.GaussianBlur(mask, (0, 0), max(1.0, k / 4))
-    h, w = mask.shape
-    return (mask * cv2.createHanningWindow((w, h), cv2.CV_32F)).astype(np.float32)
-
-
-#: The global shift is measured on frames no smaller than this (shorter side, px): phase
-#: correlation of a small frame shrunk further has too few pixels to find the peak.
-MIN_SHIFT_SIDE = 240
-
-
-def shift_scale(shape: tuple[int, int], scale: float) -> float:
-    """The resize factor the global shift uses: `scale`, raised so that the shorter side keeps
-    MIN_SHIFT_SIDE pixels, and never above 1."""
-    return float(min(1.0, max(scale, MIN_SHIFT_SIDE / max(1, min(shape)))))
 
 
 def global_shift(frames: np.ndarray, scale: float = 1.0, slope: bool = False

@@ -23,7 +23,7 @@ import numpy as np
 
 from vtsbench.errors import VtsError
 from vtsbench.labels import STATES
-from vtsbench.models.contact_crop import CachedItems
+from vtsbench.models.contact_crop import FLOWS, CachedItems
 from vtsbench.recipes import Recipe, fit_view, progress_iter
 
 MODALITIES = ("rgb", "depth", "rgbd")
@@ -60,6 +60,17 @@ def input_mode(config: dict[str, Any]) -> str:
 
 def uses_flow(config: dict[str, Any]) -> bool:
     return input_mode(config).endswith("+flow")
+
+
+def flow_kind(config: dict[str, Any]) -> str | None:
+    """The motion channels of a `+flow` input: `shift` (phase-correlation displacement of the
+    moving gel) or `dis` (dense optical flow; checkpoints without the key); None without."""
+    if not uses_flow(config):
+        return None
+    kind = config.get("flow") or "dis"
+    if kind not in FLOWS:
+        raise VtsError(f"flow must be one of {', '.join(FLOWS)}, not {kind!r}")
+    return kind
 
 
 def _normalize(x: Any, config: dict[str, Any]) -> Any:
@@ -110,7 +121,7 @@ class CropData(CachedItems):
 
         s = self.view[i]
         x, self.scale = contact_crop(s, int(self.config["crop_px"]), self.size,
-                                     self.config["modality"], flow=uses_flow(self.config))
+                                     self.config["modality"], flow=flow_kind(self.config))
         x = x[self.frame_numbers(len(x), self.frames)]
         state = -1 if s.get("state_idx") is None else int(s["state_idx"])
         direction = -1 if s.get("direction") is None else int(s["direction"])
@@ -140,6 +151,10 @@ class TimesformerRecipe(Recipe):
             "input": None,              # frames | delta (each frame minus the first) |
                                         # frames+delta | frames+flow | frames+delta+flow
                                         # (None: frames+delta+flow with crop_px)
+            "pool": "cls+mean",         # what the heads read: cls | cls+mean (checkpoints
+                                        # without the key: cls)
+            "flow": "shift",            # the +flow channels: shift (phase correlation of
+                                        # the moving gel) | dis (dense optical flow)
             "delta_gain": 4.0,          # delta input: gain before clipping to [-1, 1]
             "crop_px": 320,             # square of this many sensor px around the contact,
                                         # resized to image_size; None: the whole frame
@@ -168,7 +183,7 @@ class TimesformerRecipe(Recipe):
             raise VtsError(f"config must be 'small' or 'paper', not {config['config']!r}")
         if config["modality"] not in MODALITIES:
             raise VtsError(f"modality must be one of {MODALITIES}, not {config['modality']!r}")
-        input_mode(config)
+        flow_kind(config)
         if int(config["slip_oversample"]) < 1:
             raise VtsError("slip_oversample must be at least 1")
 
@@ -181,7 +196,8 @@ class TimesformerRecipe(Recipe):
             pretrained=pretrained, image_size=config["image_size"],
             num_frames=config["num_frames"], dropout=float(config["dropout"]),
             with_delta="frames+delta" in input_mode(config),
-            extra_channels=2 if uses_flow(config) else 0)
+            extra_channels=2 if uses_flow(config) else 0,
+            pool=config.get("pool") or "cls")
 
     @staticmethod
     def _view_torch(view: Any, model: Any, config: dict[str, Any]) -> Any:
