@@ -82,7 +82,7 @@ def _rows(ids: list[str], rows: range) -> str:
 def check_files(root: Path, info: DatasetInfo, report: VerifyReport,
                 advance: Callable[[int], None] | None = None) -> None:
     """sha256 of every listed file; missing and unlisted files; the dataset checksum."""
-    from .build import sha256_file
+    from .provenance import sha256_file
 
     on_disk = {p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file()}
     for rel in sorted(info.files):
