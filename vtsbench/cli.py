@@ -355,7 +355,9 @@ def _print_build(res) -> None:
 
 @app.command()
 def info(
-    dataset: Annotated[Path, typer.Argument(help="Dataset folder (made by vtsbench build).")],
+    dataset: Annotated[str, typer.Argument(
+        help="Dataset folder (made by vtsbench build), or a URL as vtsbench.load takes "
+             "(file://, http(s)://, s3://...).")],
 ) -> None:
     """Summarise a dataset: samples per object, state, direction and split part; sizes on disk;
     versions and checksum."""
@@ -368,7 +370,10 @@ def info(
 
 @app.command()
 def verify(
-    dataset: Annotated[Path, typer.Argument(help="Dataset folder (made by vtsbench build).")],
+    dataset: Annotated[str, typer.Argument(
+        help="Dataset folder (made by vtsbench build), or a URL as vtsbench.load takes "
+             "(file://, http(s)://, s3://...; a remote one is fetched to a temporary "
+             "folder).")],
     quick: Annotated[bool, typer.Option(
         "--quick",
         help="Skip decoding every chunk (checksums, schema, index, splits and shapes only).")

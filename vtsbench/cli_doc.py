@@ -24,7 +24,9 @@ this page is out of date. `vtsbench COMMAND -h` (or `--help`) shows the same, wi
   `vtsbench --install-completion` installs it for the current shell;
   `vtsbench --show-completion bash > ~/.vtsbench-complete.bash` (or `zsh`, `fish`,
   `powershell`) writes the script to source yourself.
-- A choice such as `[dct|dst|masked]` lists the accepted values; an option shown without a
+- A choice such as `[dct|dst|masked]` lists the accepted values, and any other value is a
+  one-line usage error (exit 2); `[auto|cpu|cuda|...]` also takes others (`cuda:1`). An
+  option shown without a
   value is a flag (`--quiet`), and only options where both forms mean something have a
   `--no-` form (`--no-zarr`, `--no-resume`, `--no-figures`).
 """
@@ -89,9 +91,12 @@ def _value(param: Any) -> str:
 
     if getattr(param, "is_flag", False) and not param.secondary_opts:
         return "flag"
+    ann = getattr(getattr(param, "type_descriptor", None), "annotation", str)
+    choices = _literal(ann)
+    if choices:  # a strict choice
+        return "[" + "|".join(choices) + "]"
     if param.metavar:
         return param.metavar
-    ann = getattr(getattr(param, "type_descriptor", None), "annotation", str)
     many = typing.get_origin(ann) is list
     if many:
         ann = typing.get_args(ann)[0]
@@ -100,6 +105,18 @@ def _value(param: Any) -> str:
     if lo is not None or hi is not None:
         text += f" {'' if lo is None else lo}..{'' if hi is None else hi}"
     return text + (", repeatable" if many else "")
+
+
+def _literal(ann: Any) -> list[str]:
+    """The values of a Literal annotation (also inside `Literal[...] | None`), else []."""
+    import typing
+
+    if typing.get_origin(ann) is typing.Literal:
+        return [str(v) for v in typing.get_args(ann)]
+    for arg in typing.get_args(ann):
+        if typing.get_origin(arg) is typing.Literal:
+            return _literal(arg)
+    return []
 
 
 _TYPES = {"Path": "path", "str": "text", "int": "integer", "float": "number", "bool": "bool"}
