@@ -30,7 +30,7 @@ ALLOWED = {
 }
 
 WRITERS = {"write_text", "write_bytes", "savefig", "save", "savez", "savez_compressed", "dump",
-           "save_file", "imwrite", "tofile", "replace", "rename", "ParquetWriter"}
+           "save_file", "imwrite", "imsave", "tofile", "replace", "rename", "ParquetWriter"}
 
 
 def _mode(call: ast.Call) -> str:
