@@ -44,7 +44,7 @@ results-demo: $(VENV)/.installed
 	test -f $(DEMO)/dataset/meta/info.json || $(MAKE) demo
 	$(if $(OCTOPI),test -f $(DEMO)/octopi-dataset/meta/info.json || ( \
 		$(BIN)/vtsbench manifest $(OCTOPI) --pattern '{object}_{session:d}.mov' --kind static \
-			--stride 20 --sensor gelsight-mini --out $(DEMO)/octopi --force && \
+			--stride 20 --sensor gelsight-mini --out $(DEMO)/octopi --overwrite && \
 		$(BIN)/vtsbench build $(DEMO)/octopi $(DEMO)/octopi-dataset --no-depth \
 			--workers $(WORKERS) --overwrite ))
 	$(BIN)/python benchmarks/results.py --dataset $(DEMO)/dataset --runs $(DEMO)/runs \

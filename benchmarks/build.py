@@ -49,6 +49,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from vtsbench.dataset import build as build_mod
+from vtsbench.dataset import execute, shard
 from vtsbench.dataset.build import BuildOptions, build
 from vtsbench.dataset.store import ARRAYS, Layout, open_group, write_metadata, write_shard
 from vtsbench.recordings import manifest as manifest_mod
@@ -103,7 +104,7 @@ def timed_build(rec: Path, out: Path, workers: int, repeats: int,
     """Best of `repeats` builds: total seconds, seconds in the shard phase and before it, CPU
     seconds, frames."""
     phase = {"shards": 0.0, "start": 0.0}
-    real = build_mod._run
+    real = build_mod.run_with_progress
 
     def run(*args: Any, **kwargs: Any) -> Any:
         t0 = time.perf_counter()
@@ -114,7 +115,7 @@ def timed_build(rec: Path, out: Path, workers: int, repeats: int,
             phase["shards"] += time.perf_counter() - t0
 
     best: dict[str, float] = {}
-    build_mod._run = run
+    build_mod.run_with_progress = run  # type: ignore[assignment]
     try:
         for _ in range(repeats):
             phase["shards"] = phase["start"] = 0.0
@@ -130,7 +131,7 @@ def timed_build(rec: Path, out: Path, workers: int, repeats: int,
                         "frames": sum(res.frames.values()), "others": others,
                         "before": before, "after": total - before - phase["shards"]}
     finally:
-        build_mod._run = real
+        build_mod.run_with_progress = real  # type: ignore[assignment]
     return best
 
 
@@ -176,13 +177,13 @@ def stage_times(rec: Path, work: Path, n_sequences: int = 24) -> dict[str, float
 
     cv2.setNumThreads(1)
     cal = load_calibration(rec / "calibration.safetensors")
-    mk = build_mod._maker(cal)
+    mk = shard._maker(cal)
     seqs = [e for e in load_manifest(rec).entries if e.kind == "sequence"][:n_sequences + 4]
     names = ("decode", "depth", "contact", "int16", "encode + write")
     best = dict.fromkeys(names, float("inf"))
     lay = Layout("slip", len(seqs), cal.resolution, 8, 4, 3)
     group = work / "stages"
-    with build_mod._malloc_keeps_memory():
+    with execute._malloc_keeps_memory():
         for n in range(0, len(seqs) - 3, 4):
             t = dict.fromkeys(names, 0.0)
             t0 = time.process_time()

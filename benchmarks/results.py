@@ -163,7 +163,7 @@ def run_one(run: Run, ds: Path, runs_dir: Path, boards: Path, retrain: bool,
     for old in board.glob(f"{run.method}-*.json"):
         old.unlink()
     run_cli("leaderboard", "add", str(sub), "--dataset", str(ds), "--split", run.split,
-             "--root", str(boards), "--replace", log=log)
+             "--root", str(boards), "--overwrite", log=log)
     tasks = metrics["tasks"]
 
     def acc(task: str, key: str = "accuracy") -> float | None:

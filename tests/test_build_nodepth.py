@@ -144,7 +144,7 @@ def test_no_depth_resumes_a_partial_rgbd_build(sim_recordings: Path, tmp_path: P
                                                monkeypatch: pytest.MonkeyPatch) -> None:
     from test_build_helpers import SHARD_MB
 
-    from vtsbench.dataset import build as build_mod
+    from vtsbench.dataset import execute as build_mod
     from vtsbench.dataset.build import BuildOptions, build, partial_path
 
     out = tmp_path / "ds"

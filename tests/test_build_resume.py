@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from test_build_helpers import BUILD_ARGS, SHARD_MB, cli, copy_recordings, tree_bytes
 
-from vtsbench.dataset import build as build_mod
+from vtsbench.dataset import execute as build_mod
 from vtsbench.dataset.build import WORK, BuildOptions, build, partial_path
 
 pytest_plugins = ["test_build_helpers"]

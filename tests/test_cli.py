@@ -2,6 +2,7 @@
 
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
@@ -62,9 +63,9 @@ def test_short_help_everywhere_and_flags_without_no_form() -> None:
 
 def test_choices_listed_in_help_and_completed() -> None:
     res = CliRunner().invoke(app, ["build", "-h"], env={"COLUMNS": "200"})
-    assert "[dct|dst|masked]" in res.output
+    assert "dct|dst|masked" in res.output
     res = CliRunner().invoke(app, ["calibrate", "-h"], env={"COLUMNS": "200"})
-    assert "[lut|poly|mlp]" in res.output and "[label|detect]" in res.output
+    assert "lut|poly|mlp" in res.output and "label|detect" in res.output
     env = {"_VTSBENCH_COMPLETE": "complete_bash", "COMP_WORDS": "vtsbench calibrate r --method p",
            "COMP_CWORD": "4", "PATH": ""}
     out = subprocess.run([sys.executable, "-m", "vtsbench"], env=env, capture_output=True,
@@ -75,3 +76,54 @@ def test_choices_listed_in_help_and_completed() -> None:
 def test_completion_script() -> None:
     res = CliRunner().invoke(app, ["--show-completion", "bash"])
     assert res.exit_code == 0 and "_VTSBENCH_COMPLETE" in res.output
+
+
+@pytest.mark.parametrize("args, option", [
+    (["build", "rec", "ds", "--solver", "fft"], "--solver"),
+    (["calibrate", "rec", "--out", "c.st", "--method", "kriging"], "--method"),
+    (["calibrate", "rec", "--out", "c.st", "--solver", "fft"], "--solver"),
+    (["calibrate", "rec", "--out", "c.st", "--device", "tpu"], "--device"),
+    (["calibrate", "rec", "--out", "c.st", "--circles", "guess"], "--circles"),
+    (["depth", "x.png", "--calibration", "c.st", "--device", "gpu"], "--device"),
+    (["manifest", "f", "--pattern", "{object}.png", "--kind", "video"], "--kind"),
+    (["collect", "rec", "--source", "0", "--kind", "video"], "--kind"),
+])
+def test_a_bad_choice_is_one_usage_line(args: list[str], option: str, tmp_path: Path,
+                                        monkeypatch: pytest.MonkeyPatch,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """Choices are checked by the command line itself: one line naming the option and the
+    accepted values, exit 2, before the command runs (nothing written)."""
+    from vtsbench.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", ["vtsbench", *args])
+    with pytest.raises(SystemExit) as e:
+        main()
+    err = capsys.readouterr().err.strip()
+    assert e.value.code == 2 and len(err.splitlines()) == 1, err
+    assert option in err and "is not one of" in err
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("args, old, new", [
+    (["manifest", "f", "--pattern", "{object}.png", "--force"], "--force", "--overwrite"),
+    (["build", "rec", "ds", "--version", "2.0.0"], "build --version", "--dataset-version"),
+    (["collect", "rec", "--source", "missing.mp4", "--ball-radius", "2"], "--ball-radius",
+     "--ball-radius-mm"),
+])
+def test_old_spellings_work_with_a_note(args: list[str], old: str, new: str, tmp_path: Path,
+                                        monkeypatch: pytest.MonkeyPatch,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """A renamed option's old spelling is hidden from --help but still accepted, with a
+    one-line deprecation note naming the new one."""
+    from vtsbench.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", ["vtsbench", *args])
+    with pytest.raises(SystemExit):
+        main()
+    err = capsys.readouterr().err
+    assert f"note: {old} is deprecated; use {new}" in err
+    name = args[0]
+    res = CliRunner().invoke(app, [name, "-h"], env={"COLUMNS": "200"})
+    assert f"{old.split()[-1]} " not in res.output.replace(new, "")

@@ -156,8 +156,41 @@ def test_metadata(tmp_path: Path) -> None:
     assert "invalid metadata (sub.meta.json)" in text and "'method' is a required" in text
     path = write(tmp_path, good_rows())
     (tmp_path / "sub.meta.json").unlink()
-    with pytest.raises(VtsError, match="metadata file not found"):
+    with pytest.raises(VtsError, match=r"1 problem.*metadata file not found"):
         load_submission(path, fake_truth())
+    (tmp_path / "sub.meta.json").write_text("{not json")
+    with pytest.raises(VtsError, match=r"1 problem.*sub\.meta\.json"):
+        load_submission(path, fake_truth())
+
+
+def test_missing_metadata_is_listed_with_the_row_problems(tmp_path: Path) -> None:
+    """Every class at once, as documented: a missing metadata file, an unknown label, an id
+    not in the split, missing rows and an invalid seed, in one line."""
+    rows = [{**r, "seed": 0} for r in good_rows()[2:]]  # s0, s1 state missing
+    rows[0]["pred"] = "wobble"  # unknown label: s2 state
+    rows.append({"sample_id": "zz", "task": "state", "pred": 1, "seed": 0})  # not in split
+    rows.append({"sample_id": "s3", "task": "direction", "pred": 1, "seed": "x"})  # bad seed
+    path = write(tmp_path, rows, header="sample_id,task,pred,seed")
+    (tmp_path / "sub.meta.json").unlink()
+    with pytest.raises(VtsError) as e:
+        load_submission(path, fake_truth())
+    text = str(e.value)
+    assert "\n" not in text and text.startswith(f"{path}: 5 problem(s): ")
+    for cls in ("metadata file not found", "unknown labels: 1 (first: s2 state 'wobble')",
+                "ids not in split seen/test: 1 (first: zz)", "invalid seeds",
+                "missing ids: 3 (first: s0 (state, seed 0), s1 (state, seed 0), "
+                "s2 (state, seed 0))"):
+        assert cls in text, cls
+
+
+def test_an_unreadable_submission_is_listed_with_the_metadata(tmp_path: Path) -> None:
+    path = tmp_path / "sub.parquet"
+    path.write_bytes(b"PAR1 not really")
+    with pytest.raises(VtsError) as e:
+        load_submission(path, fake_truth())
+    text = str(e.value)
+    assert "2 problem(s)" in text and "metadata file not found" in text
+    assert "not a readable parquet file" in text
 
 
 def test_every_problem_listed_at_once(tmp_path: Path) -> None:

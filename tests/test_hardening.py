@@ -169,7 +169,7 @@ def test_calibration_with_nan_coefficients_is_refused(rec: Path, tmp_path: Path)
 def test_a_build_whose_output_lock_is_held_is_refused(rec: Path, tmp_path: Path) -> None:
     import fcntl
 
-    from vtsbench.dataset.build import lock_path
+    from vtsbench.dataset.staging import lock_path
 
     out = tmp_path / "out"
     with open(lock_path(out), "a+b") as fh:

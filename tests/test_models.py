@@ -174,8 +174,11 @@ def test_grad_cam_maps_and_overlays(tmp_path, resnet_rgb):
     cams_t = grad_cam(resnet_rgb, x, target=[3, 7])
     assert cams_t.shape == (2, 64, 64)
     paths = write_gradcam_overlays(x, cams, [tmp_path / "a.png", tmp_path / "sub" / "b.png"])
+    from test_figures import png_dpi
+
     for p in paths:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert round(png_dpi(p)[0]) == 150  # print resolution stated in the PNG
     depth = torch.rand(1, 1, 64, 64)
     (p,) = write_gradcam_overlays(depth, cams[:1], [tmp_path / "d.png"])
     assert p.stat().st_size > 0

@@ -1,35 +1,74 @@
-"""Atomic file and folder writes: output appears complete or not at all."""
+"""Atomic file and folder writes: output appears complete or not at all.
+
+The one way the package writes its outputs (tests/test_atomic_outputs.py fails on a module that
+writes a file by other means): bytes and text through a temporary name and a rename, a path to
+hand to a library that writes by name (`replacing`), and staged folders.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import os
+import secrets
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
+#: Suffix of the temporary files; a build removes the ones a killed process left behind.
+TMP_SUFFIX = ".tmp"
 
-def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
-    """Write data to path through a temporary file in the same folder and a rename."""
+
+def temporary_name(path: Path) -> Path:
+    """A unique hidden name beside path for a file being written (ends in TMP_SUFFIX)."""
+    return path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}{TMP_SUFFIX}")
+
+
+def write_bytes_atomic(path: str | os.PathLike, data: bytes | Sequence[bytes]) -> None:
+    """Write a file (bytes, or parts written one after the other) through a unique temporary
+    name in its folder and a rename.
+
+    Unlike mkstemp the file gets the ordinary permissions (umask), so a shared dataset is
+    readable by others; a temporary left by a killed process ends in TMP_SUFFIX.
+    """
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    tmp = temporary_name(path)
     try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
+        with open(tmp, "xb") as fh:
+            if isinstance(data, (bytes, bytearray, memoryview)):
+                fh.write(data)
+            else:
+                fh.writelines(data)
         os.replace(tmp, path)
     except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
+        tmp.unlink(missing_ok=True)
         raise
 
 
-def _umask() -> int:
-    """The process umask (read by setting and restoring it)."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+@contextlib.contextmanager
+def replacing(path: str | os.PathLike) -> Iterator[Path]:
+    """A temporary path beside `path` for a library that writes a file by name (safetensors,
+    csv, zipfile): renamed to `path` when the block succeeds, removed when it fails."""
+    path = Path(path)
+    tmp = temporary_name(path)
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def replace_dir(stage: Path, out: Path) -> None:
+    """Rename a finished folder to `out`; an existing `out` is swapped out first and then
+    deleted, so `out` is never missing a moment nor half old, half new."""
+    if out.exists():
+        old = out.with_name(f".{out.name}.old-{os.getpid()}-{secrets.token_hex(6)}")
+        os.replace(out, old)
+        os.replace(stage, out)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(stage, out)
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
@@ -71,13 +110,7 @@ def staged_dir(out: str | os.PathLike, overwrite: bool = False,
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
     try:
         yield stage
-        if out.exists():
-            old = out.with_name(f".{out.name}.old-{os.getpid()}-{os.urandom(4).hex()}")
-            os.replace(out, old)
-            os.replace(stage, out)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(stage, out)
+        replace_dir(stage, out)
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         raise

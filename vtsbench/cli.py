@@ -5,7 +5,7 @@ from __future__ import annotations
 import contextlib
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any, Literal
 
 import typer
 
@@ -42,13 +42,27 @@ def _root(
     """Options of `vtsbench` itself (the app's help text is the Typer's)."""
 
 
-def _choice(*values: str, **kw):
-    """An option whose value is one of `values`: --help lists them and the shell completes
-    them; the command checks the value itself (its one-line error names the choices)."""
+def _choice(**kw):
+    """An option whose annotation is a Literal of its values: --help lists them, the shell
+    completes them, and any other value is a one-line usage error naming them (exit 2)."""
+    return typer.Option(**kw)
+
+
+def _open_choice(*values: str, **kw):
+    """An option with usual values (listed in --help and completed) that takes others too:
+    a device is auto, cpu, cuda or cuda:N."""
     def complete(incomplete: str) -> list[str]:
         return [v for v in values if v.startswith(incomplete)]
 
-    return typer.Option(metavar="[" + "|".join(values) + "]", autocompletion=complete, **kw)
+    return typer.Option(metavar="[" + "|".join(values) + "|...]", autocompletion=complete,
+                        **kw)
+
+
+def _deprecated(value: Any, old: str, new: str) -> Any:
+    """The value of a hidden old spelling of an option, with a one-line note when it is used."""
+    if value not in (None, False):
+        typer.echo(f"note: {old} is deprecated; use {new}", err=True)
+    return value
 
 
 def _fail(err: Exception, code: int = 2) -> None:
@@ -174,8 +188,7 @@ def manifest(
         help="File-name pattern relative to FOLDER, e.g. '{object}_{take}.mov'. Fields: object, "
              "take, session, state, direction; '{name:d}' matches digits only; fields match "
              "greedily from the left; '/' matches sub-folders.")],
-    kind: Annotated[str | None, _choice(
-        "static", "sequence", "press",
+    kind: Annotated[Literal["static", "sequence", "press"] | None, _choice(
         help="static, sequence or press (default: sequence for videos and image folders, "
              "static for images).")] = None,
     sensor: Annotated[str, typer.Option(help="Sensor id.")] = "unknown",
@@ -199,8 +212,9 @@ def manifest(
     stride: Annotated[int | None, typer.Option(
         min=1, help="Step between windows; with --kind static, a static frame every STRIDE "
                     "frames of each video or image folder (else its first frame).")] = None,
-    force: Annotated[bool, typer.Option(
-        "--force", help="Replace an existing recordings.json.")] = False,
+    overwrite: Annotated[bool, typer.Option(
+        "--overwrite", help="Replace an existing recordings.json.")] = False,
+    force: Annotated[bool, typer.Option("--force", hidden=True)] = False,
     out: Annotated[Path | None, typer.Option(
         help="Write recordings.json into this folder instead (for read-only data); paths in it "
              "point back to FOLDER.")] = None,
@@ -222,7 +236,9 @@ def manifest(
     opts = ManifestOptions(pattern=pattern, kind=kind, sensor=sensor, session=session,
                            mm_per_px=mm_per_px, fps=fps, background=background,
                            ball_radius_mm=ball_radius_mm, circles=circles, window=window,
-                           stride=stride, force=force, out=out, labels=labels,
+                           stride=stride, out=out,
+                           force=overwrite or _deprecated(force, "--force", "--overwrite"),
+                           labels=labels,
                            markers=tuple(marker or ()), progress=True)
     m, path = _run(write_pattern_manifest, folder, opts)
     typer.echo(f"wrote {path}: {len(m.entries)} entries in {len(m.sessions)} session(s)")
@@ -250,8 +266,8 @@ def build(
         help="Calibration file (default: RECORDINGS/calibration.safetensors, as written by "
              "`vtsbench calibrate RECORDINGS --out RECORDINGS/calibration.safetensors`).")
     ] = None,
-    solver: Annotated[str, _choice("dct", "dst", "masked",
-                                   help="Depth solver: dct, dst or masked.")] = "dct",
+    solver: Annotated[Literal["dct", "dst", "masked"], _choice(
+        help="Depth solver: dct, dst or masked.")] = "dct",
     no_depth: Annotated[bool, typer.Option(
         "--no-depth", help="RGB only: no depth or contact arrays, no calibration needed (for "
                            "sensors without calibration presses).")] = False,
@@ -266,8 +282,10 @@ def build(
              "stopping.")] = False,
     overwrite: Annotated[bool, typer.Option(
         "--overwrite", help="Replace OUT if it exists.")] = False,
-    version: Annotated[str, typer.Option(
-        help="Dataset version (semantic version of the content).")] = "1.0.0",
+    dataset_version: Annotated[str, typer.Option(
+        help="The dataset's version (semantic version of its content; `vtsbench --version` is "
+             "the program's).")] = "1.0.0",
+    version: Annotated[str | None, typer.Option("--version", hidden=True)] = None,
     compression_level: Annotated[int, typer.Option(
         min=0, max=22, help="zstd level of the arrays; 0 stores them uncompressed.")] = 3,
     seed: Annotated[int, typer.Option(min=0, help="Seed of the split files.")] = 0,
@@ -298,7 +316,8 @@ def build(
     opts = BuildOptions(calibration=calibration, solver=solver, depth=not no_depth,
                         frames=frames, workers=workers,
                         scheduler=scheduler, skip_bad=skip_bad, overwrite=overwrite,
-                        version=version, compression_level=compression_level, seed=seed,
+                        version=_deprecated(version, "build --version", "--dataset-version")
+                        or dataset_version, compression_level=compression_level, seed=seed,
                         shard_mb=shard_mb, progress=not quiet,
                         holdout_objects=holdout_objects, split_files=tuple(split_file or ()))
     res = _run(run_build, recordings, out, opts, log=lambda m: console.print(m, soft_wrap=True,
@@ -336,7 +355,9 @@ def _print_build(res) -> None:
 
 @app.command()
 def info(
-    dataset: Annotated[Path, typer.Argument(help="Dataset folder (made by vtsbench build).")],
+    dataset: Annotated[str, typer.Argument(
+        help="Dataset folder (made by vtsbench build), or a URL as vtsbench.load takes "
+             "(file://, http(s)://, s3://...).")],
 ) -> None:
     """Summarise a dataset: samples per object, state, direction and split part; sizes on disk;
     versions and checksum."""
@@ -349,7 +370,10 @@ def info(
 
 @app.command()
 def verify(
-    dataset: Annotated[Path, typer.Argument(help="Dataset folder (made by vtsbench build).")],
+    dataset: Annotated[str, typer.Argument(
+        help="Dataset folder (made by vtsbench build), or a URL as vtsbench.load takes "
+             "(file://, http(s)://, s3://...; a remote one is fetched to a temporary "
+             "folder).")],
     quick: Annotated[bool, typer.Option(
         "--quick",
         help="Skip decoding every chunk (checksums, schema, index, splits and shapes only).")
@@ -436,8 +460,7 @@ def push(
 def calibrate(
     recordings: Annotated[Path, typer.Argument(help="Recordings folder with ball presses.")],
     out: Annotated[Path, typer.Option("--out", help="Calibration file to write (.safetensors).")],
-    method: Annotated[str, _choice(
-        "lut", "poly", "mlp",
+    method: Annotated[Literal["lut", "poly", "mlp"], _choice(
         help="lut (fast lookup), poly (polynomial) or mlp (small network, needs torch).")
     ] = "poly",
     holdout: Annotated[int | None, typer.Option(
@@ -453,11 +476,9 @@ def calibrate(
         help="Use the per-pixel median of the press frames as the background.")] = False,
     report: Annotated[Path | None, typer.Option(
         help="Report folder (default: FILE.report beside the calibration).")] = None,
-    solver: Annotated[str, _choice(
-        "dct", "dst", "masked",
+    solver: Annotated[Literal["dct", "dst", "masked"], _choice(
         help="Poisson solver scoring the held-out presses: dct, dst or masked.")] = "dct",
-    device: Annotated[str, _choice(
-        "auto", "cpu", "cuda",
+    device: Annotated[Literal["auto", "cpu", "cuda"], _choice(
         help="mlp training device: auto (CUDA when present), cpu or cuda.")] = "auto",
     bins: Annotated[int | None, typer.Option(help="lut: colour bins per channel (32).")] = None,
     cells: Annotated[int | None, typer.Option(
@@ -468,8 +489,7 @@ def calibrate(
     width: Annotated[int | None, typer.Option(help="mlp: units per hidden layer (32).")] = None,
     depth: Annotated[int | None, typer.Option(help="mlp: hidden layers (3).")] = None,
     epochs: Annotated[int | None, typer.Option(help="mlp: training epochs (40).")] = None,
-    circles: Annotated[str, _choice(
-        "label", "detect",
+    circles: Annotated[Literal["label", "detect"], _choice(
         help="label: use labelled circles, detect the others; detect: detect every circle "
              "(labels only compared, in report.json).")] = "label",
 ) -> None:
@@ -547,14 +567,13 @@ def depth(
     images: Annotated[list[str], typer.Argument(
         help="Images, folders of images, videos or globs such as 'takes/*.mp4' (quoted).")],
     calibration: Annotated[Path, typer.Option(help="Calibration file from `vtsbench calibrate`.")],
-    solver: Annotated[str, _choice("dct", "dst", "masked",
-                                   help="Poisson solver: dct, dst or masked.")] = "dct",
+    solver: Annotated[Literal["dct", "dst", "masked"], _choice(
+        help="Poisson solver: dct, dst or masked.")] = "dct",
     out: Annotated[Path, typer.Option(
         "--out", help="Output folder for <name>.npy (float32 mm) and <name>.png; with several "
                       "inputs, a folder's or video's maps go to OUT/<its name>/.")
     ] = Path("depth"),
-    device: Annotated[str, _choice(
-        "auto", "cpu", "cuda", "numpy",
+    device: Annotated[Literal["auto", "cpu", "cuda", "numpy"], _choice(
         help="auto (CUDA when present, else numpy), cpu or cuda (torch), numpy.")] = "auto",
     batch: Annotated[int, typer.Option(min=1, help="Frames per step.")] = 8,
     range_: Annotated[str | None, typer.Option(
@@ -639,12 +658,14 @@ def leaderboard_add(
     part: Annotated[str, typer.Option(help="Part of the split.")] = "test",
     meta: Annotated[Path | None, typer.Option(help="Metadata JSON.")] = None,
     root: _ROOT = Path("leaderboards"),
-    replace: Annotated[bool, typer.Option(
-        "--replace", help="Replace the same submission's entry.")] = False,
+    overwrite: Annotated[bool, typer.Option(
+        "--overwrite", help="Replace the same submission's entry.")] = False,
+    replace: Annotated[bool, typer.Option("--replace", hidden=True)] = False,
 ) -> None:
     """Score a submission and store it (predictions included) as a leaderboard entry."""
     from .evaluation.leaderboard import add, render
 
+    replace = overwrite or _deprecated(replace, "--replace", "--overwrite")
     path = _run(add, submission, dataset, split, part, root=root, meta=meta, replace=replace)
     _run(render, root)
     typer.echo(f"added {path}; rendered {path.parent / 'leaderboard.md'}")
@@ -664,14 +685,14 @@ def leaderboard_render(root: _ROOT = Path("leaderboards")) -> None:
 def leaderboard_rescore(
     dataset: Annotated[Path, typer.Option(help="The dataset the entries were scored on.")],
     root: _ROOT = Path("leaderboards"),
-    force: Annotated[bool, typer.Option(
-        "--force", help="Re-score entries of the current metric version "
-                                            "too.")] = False,
+    all_: Annotated[bool, typer.Option(
+        "--all", help="Re-score entries of the current metric version too.")] = False,
+    force: Annotated[bool, typer.Option("--force", hidden=True)] = False,
 ) -> None:
     """Re-score stored entries whose metric version is not the current one, then re-render."""
     from .evaluation.leaderboard import render, rescore
 
-    changed = _run(rescore, root, dataset, force=force)
+    changed = _run(rescore, root, dataset, force=all_ or _deprecated(force, "--force", "--all"))
     _run(render, root)
     typer.echo(f"re-scored {len(changed)} entr{'y' if len(changed) == 1 else 'ies'}")
 
@@ -685,7 +706,7 @@ def train(
     config: Annotated[Path | None, typer.Option(
         help="JSON or TOML file overriding keys of the recipe's default config.")] = None,
     seed: Annotated[int, typer.Option(min=0, help="Random seed.")] = 0,
-    device: Annotated[str, _choice(
+    device: Annotated[str, _open_choice(
         "auto", "cpu", "cuda", help="auto (CUDA when present), cpu, cuda, cuda:1...")] = "auto",
     resume: Annotated[bool, typer.Option(
         "--resume/--no-resume", help="Continue from the last checkpoint in --out.")] = True,
@@ -728,7 +749,8 @@ def predict(
     split: Annotated[str, typer.Option(help="Split scheme.")],
     out: Annotated[Path, typer.Option(help="Submission CSV to write (+ OUT.meta.json).")],
     part: Annotated[str, typer.Option(help="Part of the split to predict.")] = "test",
-    device: Annotated[str, _choice("auto", "cpu", "cuda", help="auto, cpu, cuda...")] = "auto",
+    device: Annotated[str, _open_choice("auto", "cpu", "cuda",
+                                        help="auto, cpu, cuda, cuda:1...")] = "auto",
     method: Annotated[str | None, typer.Option(
         help="Method name in the metadata (default: the recipe's name).")] = None,
     seed: Annotated[int, typer.Option(min=0, help="Training seed, for the metadata.")] = 0,
@@ -793,16 +815,18 @@ def collect(
                     "into entries.")] = 10,
     background: Annotated[Path | None, typer.Option(
         help="Background image file for a new session, instead of the median.")] = None,
-    kind: Annotated[str, _choice("sequence", "static", "press",
-                                 help="sequence, static or press.")] = "sequence",
+    kind: Annotated[Literal["sequence", "static", "press"], _choice(
+        help="sequence, static or press.")] = "sequence",
     window: Annotated[int, typer.Option(min=2, help="Frames per sequence window.")] = 8,
     stride: Annotated[int | None, typer.Option(
         min=1, help="Step between windows (default: --window).")] = None,
     every: Annotated[int, typer.Option(
         min=1, help="static: keep every K-th frame; press: at most one frame per K.")] = 10,
-    ball_radius: Annotated[float | None, typer.Option(
+    ball_radius_mm: Annotated[float | None, typer.Option(
         callback=_finite,
         help="Indenter ball radius in mm (required for --kind press).")] = None,
+    ball_radius: Annotated[float | None, typer.Option(
+        "--ball-radius", callback=_finite, hidden=True)] = None,
     contact_level: Annotated[float, typer.Option(
         callback=_finite,
         help="press: gray levels of (blurred) change that count as contact.")] = 10.0,
@@ -843,7 +867,10 @@ def collect(
         source=source, session=session, sensor=sensor, mm_per_px=mm_per_px, fps=fps,
         mount_rotation_deg=mount_rotation, mount_mirror=mount_mirror,
         background_frames=background_frames, background=background, kind=kind, window=window,
-        stride=stride, every=every, ball_radius_mm=ball_radius, contact_level=contact_level,
+        stride=stride, every=every,
+        ball_radius_mm=ball_radius_mm if ball_radius_mm is not None
+        else _deprecated(ball_radius, "--ball-radius", "--ball-radius-mm"),
+        contact_level=contact_level,
         contact_area=contact_area, object=object_name, take=take, max_frames=max_frames,
         motion_log=motion_log, log_offset_s=log_offset, slip_threshold_mm=slip_threshold_mm,
         press_threshold_mm=press_threshold_mm, append=append, overwrite=overwrite)

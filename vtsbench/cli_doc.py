@@ -24,33 +24,44 @@ this page is out of date. `vtsbench COMMAND -h` (or `--help`) shows the same, wi
   `vtsbench --install-completion` installs it for the current shell;
   `vtsbench --show-completion bash > ~/.vtsbench-complete.bash` (or `zsh`, `fish`,
   `powershell`) writes the script to source yourself.
-- A choice such as `[dct|dst|masked]` lists the accepted values; an option shown without a
+- A choice such as `[dct|dst|masked]` lists the accepted values, and any other value is a
+  one-line usage error (exit 2); `[auto|cpu|cuda|...]` also takes others (`cuda:1`). An
+  option shown without a
   value is a flag (`--quiet`), and only options where both forms mean something have a
   `--no-` form (`--no-zarr`, `--no-resume`, `--no-figures`).
 """
 
-#: Ideas that several commands share, and the names they go by (arguments in capitals).
+#: Ideas that several commands share, and the one name each goes by (arguments in capitals).
 IDEAS: dict[str, tuple[str, ...]] = {
-    "where the output goes": ("OUT", "--out"),
-    "replace what is there": ("--overwrite", "--force", "--replace"),
-    "the dataset to read": ("DATASET", "--dataset"),
-    "ball radius in mm": ("--ball-radius", "--ball-radius-mm"),
-    "a version": ("--version",),
+    "the data a command works on (its subject)": ("FOLDER", "RECORDINGS", "DATASET",
+                                                  "SUBMISSION"),
+    "the data folder a command creates": ("OUT",),
+    "any other output (a file, a report, a run)": ("--out",),
+    "a dataset read for reference": ("--dataset",),
+    "replace what is there": ("--overwrite",),
+    "ball radius in mm": ("--ball-radius-mm",),
+    "the dataset's version": ("--dataset-version",),
+    "the program's version": ("--version",),
+    "no progress bar": ("--quiet",),
 }
 
 KNOWN = """\
-Known inconsistencies, kept as they are for now (renaming would break existing scripts):
+The conventions behind the table:
 
-- Output: `simulate`, `build` and `collect` take the output as a positional `OUT`; the other
-  commands as `--out`.
-- Replacing: `--overwrite` (simulate, build, collect) replaces an output folder; `manifest
-  --force` replaces recordings.json; `leaderboard add --replace` replaces an entry;
-  `leaderboard rescore --force` means something else (re-score current entries too).
-- Dataset: `info`, `verify`, `export-hf` and `push` take it as a positional `DATASET`; `eval`,
-  `leaderboard`, `train` and `predict` as `--dataset`. `info` and `verify` take a folder only,
-  where `vtsbench.load` also takes a URL.
-- Ball radius: `collect --ball-radius` and `manifest --ball-radius-mm`, both in mm.
-- `vtsbench --version` is the package's version; `build --version` is the dataset's.
+- Positional arguments are the command's subject: the recordings, dataset or submission it
+  reads (`check FOLDER`, `info DATASET`, `eval SUBMISSION`), and the data folder it creates
+  (`simulate OUT`, `collect OUT`, `build RECORDINGS OUT`). `info` and `verify` take a path or
+  any URL `vtsbench.load` takes.
+- Every other output is `--out` (a calibration file, a contact sheet, depth maps, an evaluation
+  report, a training run, a submission).
+- A dataset read for reference by a command about something else (a submission, a recipe) is
+  `--dataset`.
+- Replacing an existing output is always `--overwrite`. Old spellings still work, hidden, with a
+  one-line deprecation note: `manifest --force`, `leaderboard add --replace`, `leaderboard
+  rescore --force` (now `--all`: re-score current entries too), `collect --ball-radius`,
+  `build --version` (now `--dataset-version`).
+- Units are part of a name where a value has one (`--ball-radius-mm`, `--mm-per-px`,
+  `--shard-mb`).
 """
 
 
@@ -80,9 +91,12 @@ def _value(param: Any) -> str:
 
     if getattr(param, "is_flag", False) and not param.secondary_opts:
         return "flag"
+    ann = getattr(getattr(param, "type_descriptor", None), "annotation", str)
+    choices = _literal(ann)
+    if choices:  # a strict choice
+        return "[" + "|".join(choices) + "]"
     if param.metavar:
         return param.metavar
-    ann = getattr(getattr(param, "type_descriptor", None), "annotation", str)
     many = typing.get_origin(ann) is list
     if many:
         ann = typing.get_args(ann)[0]
@@ -91,6 +105,18 @@ def _value(param: Any) -> str:
     if lo is not None or hi is not None:
         text += f" {'' if lo is None else lo}..{'' if hi is None else hi}"
     return text + (", repeatable" if many else "")
+
+
+def _literal(ann: Any) -> list[str]:
+    """The values of a Literal annotation (also inside `Literal[...] | None`), else []."""
+    import typing
+
+    if typing.get_origin(ann) is typing.Literal:
+        return [str(v) for v in typing.get_args(ann)]
+    for arg in typing.get_args(ann):
+        if typing.get_origin(arg) is typing.Literal:
+            return _literal(arg)
+    return []
 
 
 _TYPES = {"Path": "path", "str": "text", "int": "integer", "float": "number", "bool": "bool"}
@@ -145,7 +171,7 @@ def markdown() -> str:
         out.append(_row("`-h` / `--help`", "`flag`", "", "Show the help and exit."))
         out.append("")
     out.append("## One name per idea\n")
-    out.append("The names each shared idea goes by now, and the commands using each:\n")
+    out.append("The name each shared idea goes by, and the commands using it:\n")
     out.append(_row("idea", "name", "commands"))
     out.append("|---|---|---|")
     for idea, names in IDEAS.items():
@@ -161,7 +187,9 @@ def main(argv: list[str] | None = None) -> int:
     """Write the page to the path given (default docs/cli.md)."""
     args = sys.argv[1:] if argv is None else argv
     path = Path(args[0] if args else "docs/cli.md")
-    path.write_text(markdown(), encoding="utf-8")
+    from .atomic import write_text_atomic
+
+    write_text_atomic(path, markdown())
     print(f"wrote {path}")
     return 0
 

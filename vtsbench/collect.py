@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
@@ -192,10 +191,11 @@ def _check_options(o: CollectOptions) -> None:
     if o.sensor is not None and not o.sensor.strip():
         raise VtsError("--sensor must not be empty")
     if o.kind == "press" and o.ball_radius_mm is None:
-        raise VtsError("--kind press needs --ball-radius (the indenter's radius in mm)")
+        raise VtsError("--kind press needs --ball-radius-mm (the indenter's radius in mm)")
     if o.kind != "press" and o.ball_radius_mm is not None:
-        raise VtsError("--ball-radius applies to --kind press only")
-    positive = (("--mm-per-px", o.mm_per_px), ("--fps", o.fps), ("--ball-radius", o.ball_radius_mm),
+        raise VtsError("--ball-radius-mm applies to --kind press only")
+    positive = (("--mm-per-px", o.mm_per_px), ("--fps", o.fps),
+                ("--ball-radius-mm", o.ball_radius_mm),
                 ("--slip-threshold-mm", o.slip_threshold_mm),
                 ("--press-threshold-mm", o.press_threshold_mm))
     for name, value in positive:
@@ -395,17 +395,6 @@ def _record(cap: media.Capture, take_dir: Path, plan: _Plan, progress: bool) -> 
     return rec
 
 
-def _write_png_atomic(path: Path, rgb: np.ndarray) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        media.write_png(tmp, rgb)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
-        raise
-
-
 @contextlib.contextmanager
 def _opened(source: str) -> Iterator[media.Capture]:
     cap = media.Capture(source)
@@ -511,7 +500,7 @@ def collect(out: str | Path, opts: CollectOptions, progress: bool = True) -> Col
                 m, new = build(rec)
             if new is not None:
                 bg = rec.background if bg_file is None else bg_file
-                _write_png_atomic(session_dir / BACKGROUND_NAME, bg)
+                media.write_png(session_dir / BACKGROUND_NAME, bg)  # atomic
             save_manifest(out, m)
     return CollectResult(out, m, opts.session, take, rec.entries, rec.frames_read,
                          session is None, rec.stopped)

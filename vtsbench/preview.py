@@ -64,6 +64,8 @@ def write_preview(folder: str | Path, out: str | Path, n: int = 12, seed: int = 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from .figures import MIN_FONT_PT, save_png
+
     folder, out = Path(folder), Path(out)
     m = load_manifest(folder)
     entries = pick_entries(m, n, seed)
@@ -83,7 +85,7 @@ def write_preview(folder: str | Path, out: str | Path, n: int = 12, seed: int = 
         src_idx, k = _shown_frame(e)
         rgb = read_frame(folder / e.source.path, src_idx)
         ax.imshow(rgb)
-        ax.set_title(_caption(e), fontsize=7)
+        ax.set_title(_caption(e), fontsize=MIN_FONT_PT)
         _draw_overlays(ax, e, rgb.shape)
         if with_truth:
             dax = axes[r][c * per + 1]
@@ -91,16 +93,13 @@ def write_preview(folder: str | Path, out: str | Path, n: int = 12, seed: int = 
                 depth = read_truth(folder / e.truth).depth_mm[k]
                 im = dax.imshow(depth, cmap="viridis", vmin=0.0, vmax=max(float(depth.max()), 1e-3))
                 cb = fig.colorbar(im, ax=dax, fraction=0.035, pad=0.02)
-                cb.ax.tick_params(labelsize=6)
-                dax.set_title("true depth (mm)", fontsize=7)
+                cb.ax.tick_params(labelsize=MIN_FONT_PT)
+                dax.set_title("true depth (mm)", fontsize=MIN_FONT_PT)
     fig.suptitle(f"{folder.name}: {len(m.entries)} entries, {len(m.sessions)} session(s)",
-                 fontsize=9)
+                 fontsize=11)
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp.png")
-    fig.savefig(tmp, dpi=90)
-    plt.close(fig)
-    tmp.replace(out)
+    save_png(fig, out)
     return len(entries)
 
 

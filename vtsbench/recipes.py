@@ -227,7 +227,9 @@ def write_submission(rows: Iterable[dict[str, Any]], out: str | Path, *, method:
     extra_cols = sorted({k for r in rows for k in r if k not in ROW_COLUMNS},
                         key=lambda k: (not k.startswith("score_"), len(k), k))
     cols = [*ROW_COLUMNS, *extra_cols]
-    with open(out, "w", newline="") as fh:
+    from .atomic import replacing, write_text_atomic
+
+    with replacing(out) as tmp, open(tmp, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=cols)
         w.writeheader()
         for r in rows:
@@ -242,7 +244,7 @@ def write_submission(rows: Iterable[dict[str, Any]], out: str | Path, *, method:
         meta["seeds"] = seeds
     meta.update(extra or {})
     meta_path = default_meta_path(out)
-    meta_path.write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
+    write_text_atomic(meta_path, json.dumps(meta, indent=1, sort_keys=True) + "\n")
     return out, meta_path
 
 

@@ -164,6 +164,8 @@ def save_checkpoint(path: str | Path, model: torch.nn.Module,
     through a temporary file and a rename."""
     from safetensors.torch import save_file
 
+    from .atomic import replacing
+
     path = Path(path)
     tensors: dict[str, torch.Tensor] = {}
     for k, v in _unwrap(model).state_dict().items():
@@ -190,9 +192,8 @@ def save_checkpoint(path: str | Path, model: torch.nn.Module,
     for k, v in (metadata or {}).items():
         meta[k] = v if isinstance(v, str) else json.dumps(v)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    save_file(tensors, str(tmp), metadata=meta)
-    os.replace(tmp, path)
+    with replacing(path) as tmp:
+        save_file(tensors, str(tmp), metadata=meta)
     return path
 
 

@@ -14,9 +14,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..atomic import write_bytes_atomic
 from .hub_layout import HUB_DIR, HubLayout, configs_yaml, default_config, size_category
 from .png import depth_preview_pngs, encode_png
-from .store import ARRAYS, DEPTH_SCALE_MM, KINDS, write_file
+from .store import ARRAYS, DEPTH_SCALE_MM, KINDS
 
 if TYPE_CHECKING:
     from .build import Plan
@@ -129,7 +130,7 @@ def write_preview(root: Path, plan: Plan, workers: int = 1,
     """preview/static.parquet and preview/slip.parquet (pngs: per kind, see preview_bytes)."""
     (root / "preview").mkdir(exist_ok=True)
     for kind in KINDS:
-        write_file(root / "preview" / f"{kind}.parquet",
+        write_bytes_atomic(root / "preview" / f"{kind}.parquet",
                    preview_bytes(root, plan, kind, workers, (pngs or {}).get(kind)))
 
 
@@ -272,7 +273,7 @@ Check a copy with `vtsbench verify <folder>`; summarise it with `vtsbench info <
 
 def write_card(root: Path, info: DatasetInfo, plan: Plan) -> None:
     """Write README.md."""
-    write_file(root / "README.md", card_text(info, plan).encode("utf-8"))
+    write_bytes_atomic(root / "README.md", card_text(info, plan).encode("utf-8"))
 
 
 def _hub_section(info: DatasetInfo, hub: HubLayout) -> str:
@@ -333,4 +334,4 @@ def plan_of(info: DatasetInfo, index: dict[str, Any]) -> Any:
 def write_hub_card(root: Path, ds: Any, hub: HubLayout, license: str) -> None:
     """README.md of a dataset with its hub copy (export-hf)."""
     plan = plan_of(ds.info, {k: ds.view(k).index for k in KINDS})
-    write_file(root / "README.md", card_text(ds.info, plan, hub, license).encode("utf-8"))
+    write_bytes_atomic(root / "README.md", card_text(ds.info, plan, hub, license).encode("utf-8"))

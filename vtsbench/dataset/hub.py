@@ -291,7 +291,7 @@ def write_kind(ds: VtsDataset, kind: str, root: Path, workers: int = 1,
     Each file is written through a temporary name and renamed when complete."""
     import pyarrow.parquet as pq
 
-    from .store import TMP_SUFFIX
+    from ..atomic import TMP_SUFFIX
 
     folder = root / HUB_DIR / kind
     folder.mkdir(parents=True, exist_ok=True)
@@ -391,10 +391,10 @@ def export_hf(dataset: str | Path, *, workers: int = 1, license: str = "unknown"
     import shutil
     import time
 
-    from .build import hash_files
+    from ..atomic import write_bytes_atomic
     from .card import write_hub_card
+    from .finish import hash_files
     from .loader import load
-    from .store import write_file
 
     t0 = time.perf_counter()
     if not re.fullmatch(r"[a-z0-9][a-z0-9.+-]{0,63}", license):
@@ -419,7 +419,7 @@ def export_hf(dataset: str | Path, *, workers: int = 1, license: str = "unknown"
             if not k.startswith(f"{HUB_DIR}/") and k != "README.md"}
     new = hash_files(root, lambda rel: rel.startswith(f"{HUB_DIR}/") or rel == "README.md")
     info.files = dict(sorted({**keep, **new}.items()))
-    write_file(root / INFO_PATH, info.to_json().encode())
+    write_bytes_atomic(root / INFO_PATH, info.to_json().encode())
     return ExportResult(layout, time.perf_counter() - t0)
 
 

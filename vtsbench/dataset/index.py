@@ -51,10 +51,10 @@ def index_bytes(kind: str, metas: Sequence[SampleMeta],
 def write_index(path: Path, kind: str, metas: Sequence[SampleMeta],
                 extra: Mapping[str, Sequence[str | None]] | None = None) -> None:
     """Write one kind's index atomically (extra: see index_bytes)."""
-    from .store import write_file
+    from ..atomic import write_bytes_atomic
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_file(path, index_bytes(kind, metas, extra))
+    write_bytes_atomic(path, index_bytes(kind, metas, extra))
 
 
 def read_parquet(path: Path, columns: list[str] | None = None) -> Any:

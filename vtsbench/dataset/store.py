@@ -13,15 +13,14 @@ from __future__ import annotations
 
 import json
 import os
-import secrets
 import warnings
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..atomic import write_bytes_atomic
 from ..errors import VtsError
 
 ARRAYS = ("rgb", "depth", "contact")
@@ -35,7 +34,6 @@ DEPTH_MIN_MM = -32768 * DEPTH_SCALE_MM
 DEPTH_MAX_MM = 32767 * DEPTH_SCALE_MM
 #: Target uncompressed size of one RGB shard; depth and contact shards hold the same samples.
 SHARD_BYTES = 32 * 2**20
-TMP_SUFFIX = ".tmp"
 
 
 def depth_to_int16(depth_mm: np.ndarray, out: np.ndarray | None = None,
@@ -176,7 +174,7 @@ def write_metadata(group_dir: Path, layout: Layout) -> list[Path]:
         if key.endswith("zarr.json"):
             path = group_dir / key
             path.parent.mkdir(parents=True, exist_ok=True)
-            write_file(path, buf.to_bytes())
+            write_bytes_atomic(path, buf.to_bytes())
             written.append(path)
     return written
 
@@ -253,7 +251,7 @@ def write_shard(group_dir: Path, layout: Layout, k: int, blocks: dict[str, np.nd
         parts = _direct_shard(layout, name, blocks[name])
         path = group_dir / layout.shard_key(name, k)
         path.parent.mkdir(parents=True, exist_ok=True)
-        write_file(path, parts)
+        write_bytes_atomic(path, parts)
         sizes[name] = sum(map(len, parts))
         if digests is not None:
             h = hashlib.sha256()
@@ -263,30 +261,9 @@ def write_shard(group_dir: Path, layout: Layout, k: int, blocks: dict[str, np.nd
     return sizes
 
 
-def write_file(path: Path, data: bytes | Sequence[bytes]) -> None:
-    """Write a file (bytes, or parts written one after the other) through a unique temporary
-    name in its folder and a rename.
-
-    Unlike mkstemp the file gets the ordinary permissions (umask), so a shared dataset is
-    readable by others; a temporary left by a killed process ends in TMP_SUFFIX and is removed
-    when the build finishes.
-    """
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}{TMP_SUFFIX}")
-    try:
-        with open(tmp, "xb") as fh:
-            if isinstance(data, (bytes, bytearray, memoryview)):
-                fh.write(data)
-            else:
-                fh.writelines(data)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
 def write_json(path: Path, doc: Any) -> None:
     """Write JSON with sorted keys and a final newline (stable bytes)."""
-    write_file(path, (json.dumps(doc, indent=1, sort_keys=True, allow_nan=False) + "\n")
+    write_bytes_atomic(path, (json.dumps(doc, indent=1, sort_keys=True, allow_nan=False) + "\n")
                .encode("utf-8"))
 
 

@@ -27,28 +27,68 @@ class Summary:
 
 
 def summarise(root: str | Path) -> Summary:
-    """Read info.json and the indexes of a dataset folder (no arrays)."""
+    """Read info.json and the indexes of a dataset (no arrays): a folder, or any URL
+    `vtsbench.load` takes."""
+    from .remote import local_path
+
+    path = local_path(root)
+    if path is None:
+        return _summarise_remote(str(root))
+    return _summarise(path)
+
+
+def _summarise(root: Path) -> Summary:
+    """summarise of a dataset folder."""
     from .index import read_parquet
 
-    root = Path(root)
     info = load_info(root)
-    by_object: dict[str, dict[str, int]] = {o: {} for o in info.objects}
+    tables = {}
     for kind in KINDS:
         path = root / "index" / f"{kind}.parquet"
-        if not path.is_file():
-            continue
-        t = read_parquet(path, ["object", "state"] if kind == "slip" else ["object"])
+        if path.is_file():
+            tables[kind] = read_parquet(path, _columns(kind))
+    sizes: dict[str, int] = {}
+    for p in root.rglob("*"):
+        if p.is_file():
+            _add_size(sizes, p.relative_to(root).parts, p.stat().st_size)
+    return _summary(info, tables, sizes)
+
+
+def _summarise_remote(url: str) -> Summary:
+    """summarise of a dataset at a URL: sizes of the files info.json lists."""
+    from .index import read_parquet
+    from .loader import Location
+    from .remote import remote_info, remote_sizes
+
+    loc = Location(url)
+    info = remote_info(loc)
+    tables = {kind: loc.checked(f"index/{kind}.parquet", read_parquet, _columns(kind))
+              for kind in KINDS}
+    sizes: dict[str, int] = {}
+    for rel, size in remote_sizes(loc, info).items():
+        _add_size(sizes, tuple(rel.split("/")), size)
+    return _summary(info, tables, sizes)
+
+
+def _columns(kind: str) -> list[str]:
+    return ["object", "state"] if kind == "slip" else ["object"]
+
+
+def _add_size(sizes: dict[str, int], rel: tuple[str, ...], size: int) -> None:
+    """Add a file's size to its group: data/<kind>.zarr, or the top folder."""
+    top = "/".join(rel[:2]) if rel[0] == "data" and len(rel) > 2 else rel[0]
+    sizes[top] = sizes.get(top, 0) + size
+
+
+def _summary(info: DatasetInfo, tables: dict[str, Any], sizes: dict[str, int]) -> Summary:
+    """Counts per object and state from the index tables; raw size from the shapes."""
+    by_object: dict[str, dict[str, int]] = {o: {} for o in info.objects}
+    for kind, t in tables.items():
         d = t.to_pydict()
         for i, obj in enumerate(d["object"]):
             key = "static" if kind == "static" else f"slip:{d['state'][i] or 'unknown'}"
             row = by_object.setdefault(obj, {})
             row[key] = row.get(key, 0) + 1
-    sizes: dict[str, int] = {}
-    for p in root.rglob("*"):
-        if p.is_file():
-            rel = p.relative_to(root).parts
-            top = "/".join(rel[:2]) if rel[0] == "data" and len(rel) > 2 else rel[0]
-            sizes[top] = sizes.get(top, 0) + p.stat().st_size
     raw = 0
     for shapes in info.shapes.values():
         raw += _prod(shapes["rgb"]) + (4 * _prod(shapes["depth"]) if "depth" in shapes else 0)

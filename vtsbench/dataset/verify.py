@@ -82,7 +82,7 @@ def _rows(ids: list[str], rows: range) -> str:
 def check_files(root: Path, info: DatasetInfo, report: VerifyReport,
                 advance: Callable[[int], None] | None = None) -> None:
     """sha256 of every listed file; missing and unlisted files; the dataset checksum."""
-    from .build import sha256_file
+    from .provenance import sha256_file
 
     on_disk = {p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file()}
     for rel in sorted(info.files):
@@ -258,8 +258,16 @@ def _decode_shard(group_dir: Path, lay: Layout, name: str, k: int, arr: Any,
 
 
 def verify(root: str | Path, *, decode: bool = True, progress: bool = False) -> VerifyReport:
-    """Verify a built dataset folder; report.problems is empty when everything checks out."""
-    root = Path(root)
+    """Verify a built dataset (a folder, or any URL `vtsbench.load` takes: a remote one is
+    fetched into a temporary folder first); report.problems is empty when all checks out."""
+    from .remote import local_copy
+
+    with local_copy(root) as path:
+        return _verify(path, decode, progress)
+
+
+def _verify(root: Path, decode: bool, progress: bool) -> VerifyReport:
+    """verify of a dataset folder."""
     report = VerifyReport()
     if not root.is_dir():
         raise VtsError("no such dataset folder", root)

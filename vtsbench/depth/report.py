@@ -67,7 +67,9 @@ def write_report(run: CalibrationRun, folder: str | Path) -> tuple[Path, Path]:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from ..atomic import write_bytes_atomic, write_text_atomic
+    from ..atomic import write_text_atomic
+    from ..figures import MIN_FONT_PT as FONT
+    from ..figures import PRINT_DPI, save_png
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -76,7 +78,7 @@ def write_report(run: CalibrationRun, folder: str | Path) -> tuple[Path, Path]:
 
     rows = run.shown[:MAX_ROWS]
     cal = run.calibration
-    fig = Figure(figsize=(15, 2.7 * max(1, len(rows)) + 0.6), dpi=90)
+    fig = Figure(figsize=(15, 2.7 * max(1, len(rows)) + 0.6), dpi=PRINT_DPI)
     FigureCanvasAgg(fig)
     title = (f"{cal.method} calibration of {cal.sensor}: "
              f"{'held-out' if rows and rows[0].held_out else 'training'} presses "
@@ -91,15 +93,15 @@ def write_report(run: CalibrationRun, folder: str | Path) -> tuple[Path, Path]:
         vmax = max(float(true.max()), float(pred[y0:y1, x0:x1].max()), 1e-3)
         axes = [fig.add_subplot(len(rows), 5, 5 * i + k + 1) for k in range(5)]
         axes[0].imshow(r.press.image[y0:y1, x0:x1])
-        axes[0].set_title(f"{r.press.id} ({r.press.circle_source} circle)", fontsize=8)
+        axes[0].set_title(f"{r.press.id} ({r.press.circle_source} circle)", fontsize=FONT)
         axes[1].imshow(true[y0:y1, x0:x1], vmin=0, vmax=vmax, cmap="viridis")
-        axes[1].set_title(f"reference ({r.reference}), max {true.max():.3f} mm", fontsize=8)
+        axes[1].set_title(f"reference ({r.reference}), max {true.max():.3f} mm", fontsize=FONT)
         im = axes[2].imshow(pred[y0:y1, x0:x1], vmin=0, vmax=vmax, cmap="viridis")
-        axes[2].set_title("reconstructed (plane-aligned)", fontsize=8)
+        axes[2].set_title("reconstructed (plane-aligned)", fontsize=FONT)
         fig.colorbar(im, ax=axes[2], fraction=0.046, label="mm")
         lim = max(float(np.nanmax(np.abs(err))) if np.isfinite(err).any() else 0.0, 1e-3)
         im = axes[3].imshow(err, vmin=-lim, vmax=lim, cmap="coolwarm")
-        axes[3].set_title(f"error, RMSE {r.errors['plane_aligned_rmse_mm']:.4f} mm", fontsize=8)
+        axes[3].set_title(f"error, RMSE {r.errors['plane_aligned_rmse_mm']:.4f} mm", fontsize=FONT)
         fig.colorbar(im, ax=axes[3], fraction=0.046, label="mm")
         for ax in axes[:4]:
             ax.set_xticks([])
@@ -111,17 +113,12 @@ def write_report(run: CalibrationRun, folder: str | Path) -> tuple[Path, Path]:
         axes[4].axvspan((r.press.x - r.press.r) * cal.mm_per_px[0],
                         (r.press.x + r.press.r) * cal.mm_per_px[0], color="0.9")
         axes[4].invert_yaxis()
-        axes[4].set_xlabel("x (mm)", fontsize=8)
-        axes[4].set_ylabel("depth (mm)", fontsize=8)
-        axes[4].tick_params(labelsize=7)
-        axes[4].set_title(f"profile through the centre (row {row})", fontsize=8)
+        axes[4].set_xlabel("x (mm)", fontsize=FONT)
+        axes[4].set_ylabel("depth (mm)", fontsize=FONT)
+        axes[4].tick_params(labelsize=FONT)
+        axes[4].set_title(f"profile through the centre (row {row})", fontsize=FONT)
         if i == 0:
-            axes[4].legend(fontsize=7)
+            axes[4].legend(fontsize=FONT)
     fig.tight_layout(rect=(0, 0, 1, 0.97))
-    import io
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    png = folder / "report.png"
-    write_bytes_atomic(png, buf.getvalue())
+    png = save_png(fig, folder / "report.png")
     return png, js

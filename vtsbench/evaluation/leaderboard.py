@@ -66,7 +66,7 @@ def add(submission: str | Path, dataset: str | Path, split: str, part: str = "te
     eid = f"{_slug(str(sub.meta['method']))}-{sub.sha256[:8]}"
     path = folder / f"{eid}.json"
     if path.exists() and not replace:
-        raise VtsError("this submission is already on the leaderboard (use --replace)", path)
+        raise VtsError("this submission is already on the leaderboard (use --overwrite)", path)
     entry = {
         "entry_version": ENTRY_VERSION, "id": eid,
         "added": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),

@@ -197,14 +197,25 @@ def _label(task: str, i: int, name: str) -> str:
     return f"{ARROWS[i]} {COMPASS[i]}" if task == "direction" else name
 
 
+def figure_title(doc: dict[str, Any], task: str, n: int) -> str:
+    """A figure's title: what was scored (method, split, part) and on how many samples."""
+    sub = doc.get("submission", {})
+    method = sub.get("method") or sub.get("file") or "submission"
+    return f"{method}: {task} on {doc['split']}/{doc['part']}, n = {n}"
+
+
 def write_figures(doc: dict[str, Any], out: Path) -> list[str]:
-    """confusion_<task>.png per task: counts (left) and row-normalised (right), first seed.
+    """confusion_<task>.png per task: counts (left) and row-normalised (right), first seed,
+    titled with the method, split, part and n; at print quality (vtsbench.figures).
 
     Direction classes are labelled as compass arrows (→ E, ↗ NE, ↑ N, ...). Uses matplotlib's
     object API (no pyplot) to keep the start-up short.
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+
+    from ..figures import MIN_FONT_PT as FONT
+    from ..figures import print_style, save_png
 
     names = []
     for task, t in doc["tasks"].items():
@@ -214,30 +225,32 @@ def write_figures(doc: dict[str, Any], out: Path) -> list[str]:
         with np.errstate(invalid="ignore", divide="ignore"):
             norm = cm / cm.sum(1, keepdims=True)
         k = len(labels)
-        side = 1.6 + 0.42 * k
-        fig = Figure(figsize=(2 * side + 0.6, side + 0.4))
-        FigureCanvasAgg(fig)
-        fig.subplots_adjust(left=0.14, right=0.98, bottom=0.2, top=0.9, wspace=0.45)
-        for col, (kind, mat) in enumerate((("counts", cm), ("row-normalised", norm))):
-            ax = fig.add_subplot(1, 2, col + 1)
-            show = np.nan_to_num(mat)
-            top = max(float(show.max()), 1e-9)
-            ax.imshow(show, cmap="Blues", vmin=0, vmax=top if col == 0 else 1.0)
-            ax.set_xticks(range(k), labels, rotation=0 if task == "direction" else 90,
-                          fontsize=7)
-            ax.set_yticks(range(k), labels, fontsize=7)
-            ax.set_xlabel("predicted", fontsize=8)
-            ax.set_ylabel("true", fontsize=8)
-            ax.set_title(f"{task}: {kind}", fontsize=9)
-            if k <= 15:
-                for i, j in zip(*np.nonzero(show), strict=True):
-                    v = mat[i, j]
-                    ax.text(j, i, f"{int(v)}" if col == 0 else f"{v:.2f}", ha="center",
-                            va="center", fontsize=6,
-                            color="white" if show[i, j] > 0.6 * (top if col == 0 else 1)
-                            else "black")
-        name = f"confusion_{task}.png"
-        fig.savefig(out / name, dpi=80)
+        side = 2.0 + 0.5 * k
+        with print_style():
+            fig = Figure(figsize=(2 * side + 0.6, side + 0.8))
+            FigureCanvasAgg(fig)
+            fig.subplots_adjust(left=0.14, right=0.98, bottom=0.2, top=0.84, wspace=0.45)
+            fig.suptitle(figure_title(doc, task, int(cm.sum())), fontsize=FONT + 2)
+            for col, (kind, mat) in enumerate((("counts", cm), ("row-normalised", norm))):
+                ax = fig.add_subplot(1, 2, col + 1)
+                show = np.nan_to_num(mat)
+                top = max(float(show.max()), 1e-9)
+                ax.imshow(show, cmap="Blues", vmin=0, vmax=top if col == 0 else 1.0)
+                ax.set_xticks(range(k), labels, rotation=0 if task == "direction" else 90,
+                              fontsize=FONT)
+                ax.set_yticks(range(k), labels, fontsize=FONT)
+                ax.set_xlabel("predicted", fontsize=FONT + 1)
+                ax.set_ylabel("true", fontsize=FONT + 1)
+                ax.set_title(kind, fontsize=FONT + 1)
+                if k <= 15:
+                    for i, j in zip(*np.nonzero(show), strict=True):
+                        v = mat[i, j]
+                        ax.text(j, i, f"{int(v)}" if col == 0 else f"{v:.2f}", ha="center",
+                                va="center", fontsize=FONT,
+                                color="white" if show[i, j] > 0.6 * (top if col == 0 else 1)
+                                else "black")
+            name = f"confusion_{task}.png"
+            save_png(fig, out / name)
         names.append(name)
     return names
 

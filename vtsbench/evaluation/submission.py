@@ -219,8 +219,12 @@ def validate(path: str | Path, truth: Truth, meta_path: str | Path | None = None
     path = Path(path)
     meta_path = Path(meta_path) if meta_path else default_meta_path(path)
     probs = Problems()
-    meta = read_meta(meta_path)
-    for e in schema_errors(meta, "metadata"):
+    try:
+        meta: Any = read_meta(meta_path)
+    except VtsError as e:  # not found, unreadable or not JSON: a problem like the others
+        probs.add(_without_path(e, meta_path), "")
+        meta = None
+    for e in schema_errors(meta, "metadata") if meta is not None else ():
         probs.add(f"invalid metadata ({meta_path.name})", e)
     if isinstance(meta, dict):
         v = meta.get("dataset_version")
@@ -230,7 +234,13 @@ def validate(path: str | Path, truth: Truth, meta_path: str | Path | None = None
         if isinstance(s, str) and s != truth.dataset_sha256:
             probs.add("wrong dataset checksum",
                       f"submission {s[:12]}, dataset {truth.dataset_sha256[:12]}")
-    cols = read_rows(path)
+    try:
+        cols = read_rows(path)
+    except VtsError as e:
+        if e.path is not None and Path(e.path) == path and not path.is_file():
+            raise  # no submission at all: nothing else to list
+        probs.add(_without_path(e, path), "")
+        return None, probs.lines()
     n = len(next(iter(cols.values()))) if cols else 0
     need = [c for c in ("sample_id", "task", "pred") if c not in cols]
     if n == 0:
@@ -244,6 +254,14 @@ def validate(path: str | Path, truth: Truth, meta_path: str | Path | None = None
         return None, probs.lines()
     sha = hashlib.sha256(path.read_bytes()).hexdigest()
     return Submission(path, meta, sha, preds), []
+
+
+def _without_path(err: VtsError, path: Path) -> str:
+    """A VtsError's message without its leading path, naming the file by its name instead."""
+    text = str(err)
+    if err.path is not None and text.startswith(f"{err.path}: "):
+        text = text[len(str(err.path)) + 2:]
+    return f"{text} ({path.name})" if path.name not in text else text
 
 
 def _check_rows(cols: dict[str, list[Any]], n: int, truth: Truth, probs: Problems,

@@ -208,8 +208,13 @@ def write_gradcam_overlays(
     ``images`` is ``(B, C, H, W)`` (RGB in [0, 1], or one depth channel, scaled per image),
     ``cams`` is ``(B, H, W)`` in [0, 1] (as ``grad_cam`` returns). Returns the paths written.
     """
+    import io
+
     import matplotlib
     from matplotlib.image import imsave
+
+    from ..atomic import write_bytes_atomic
+    from ..figures import PRINT_DPI
 
     if len(paths) != len(images) or len(cams) != len(images):
         raise ValueError("images, cams and paths must have the same length")
@@ -221,6 +226,8 @@ def write_gradcam_overlays(
         overlay = (1 - alpha) * base + alpha * heat
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        imsave(path, np.clip(overlay, 0.0, 1.0), format="png")
+        buf = io.BytesIO()  # one pixel per input pixel, stated as PRINT_DPI in the PNG
+        imsave(buf, np.clip(overlay, 0.0, 1.0), format="png", dpi=PRINT_DPI)
+        write_bytes_atomic(path, buf.getvalue())
         written.append(path)
     return written

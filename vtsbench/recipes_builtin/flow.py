@@ -198,6 +198,7 @@ class FlowRecipe(Recipe):
         from safetensors.numpy import save_file
 
         import vtsbench
+        from vtsbench.atomic import replacing
 
         ds = vtsbench.load(dataset_path)
         xs, ys = [], []
@@ -217,9 +218,8 @@ class FlowRecipe(Recipe):
         path = out / CHECKPOINT
         meta = {"recipe": self.name, "config": json.dumps(config), "features": json.dumps(FEATURES),
                 "split": split, "seed": str(seed), "train_samples": str(len(y))}
-        tmp = path.with_name(path.name + ".tmp")
-        save_file(tree.arrays(), str(tmp), metadata=meta)
-        tmp.replace(path)
+        with replacing(path) as tmp:
+            save_file(tree.arrays(), str(tmp), metadata=meta)
         return path
 
     def predict(self, checkpoint: str | Path, dataset_path: str | Path, split: str,

@@ -279,7 +279,7 @@ def write_pattern_manifest(folder: Path, opts: ManifestOptions,
     home.mkdir(parents=True, exist_ok=True)
     target = home / MANIFEST_NAME
     if target.exists() and not opts.force:
-        raise VtsError("already exists (use --force to replace it)", target)
+        raise VtsError("already exists (use --overwrite to replace it)", target)
     m = build_pattern_manifest(Path(folder), opts, warn)
     return m, save_manifest(home, m)
 

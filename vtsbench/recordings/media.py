@@ -299,4 +299,6 @@ def write_png(path: Path, rgb: np.ndarray, compression: int = 1) -> None:
                             cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_UP])
     if not ok:
         raise VtsError("cannot encode PNG", path)
-    path.write_bytes(buf.tobytes())
+    from ..atomic import write_bytes_atomic
+
+    write_bytes_atomic(path, buf.tobytes())
