@@ -168,7 +168,7 @@ def main() -> None:
                 print(f"{name}: too few presses for consistent centres")
             if args.rmse:
                 for k, v in held_out_rmse(folder, opts, ref).items():
-                    print(f"{name}: {k}: {v:.4f}" + (" mm" if "scored" in k else ""))
+                    print(f"{name}: {k}: " + (f"{v:.4f} mm" if "scored" in k else f"{v:.0f}"))
 
 
 if __name__ == "__main__":
