@@ -11,8 +11,11 @@ the same held-out presses) of calibrations trained with the labelled and with th
 circles, both scored against the labels and, where there are consistent centres, against the
 sphere drawn at them (label radius).
 
+With --speed, the time of detecting every press's circle with and without the restarts
+(`detect_circle(restarts=...)`, alternated, best of 3) and of one `calibrate --circles detect`.
+
     .venv/bin/python benchmarks/circles_real.py [--digit-px-per-mm 21.09] [--all] [--rounds 4]
-                                                [--rmse]
+                                                [--rmse] [--speed]
 """
 
 from __future__ import annotations
@@ -149,12 +152,36 @@ def held_out_rmse(folder: Path, opts: dict, ref: dict[str, tuple[float, float]],
         "held-out presses": float(len(errs[next(iter(errs))]))}
 
 
+def speed(folder: Path, opts: dict, repeats: int = 3) -> str:
+    """Detection time per press with and without restarts, and one calibration's time."""
+    from vtsbench.depth.calibration import calibrate, load_presses
+    from vtsbench.depth.sphere import ball_radius_px, detect_circle
+
+    presses, bg, setup, _ = load_presses(folder, **opts)
+    ball = ball_radius_px(setup["ball_radius_mm"], setup["mm_per_px"])
+    best = {True: float("inf"), False: float("inf")}
+    for _ in range(repeats):
+        for restarts in (False, True):
+            t0 = time.perf_counter()
+            for p in presses:
+                detect_circle(p.image, bg, ball_px=ball, restarts=restarts)
+            best[restarts] = min(best[restarts], time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    calibrate(folder, method="poly", circles="detect", **opts)
+    cal = time.perf_counter() - t0
+    n = len(presses)
+    return (f"detection of {n} circles: {best[False] / n * 1e3:.1f} ms a press without restarts, "
+            f"{best[True] / n * 1e3:.1f} ms with ({best[True] / best[False]:.1f} x); "
+            f"calibrate --circles detect (poly): {cal:.1f} s")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--digit-px-per-mm", type=float, default=21.09)
     ap.add_argument("--all", action="store_true", help="also list presses with clamped labels")
     ap.add_argument("--rounds", type=int, default=4, help="rounds of the consistent centres")
     ap.add_argument("--rmse", action="store_true", help="held-out depth error, both circles")
+    ap.add_argument("--speed", action="store_true", help="detection time, restarts or not")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         for name, folder, opts in recordings(Path(tmp), args.digit_px_per_mm):
@@ -166,6 +193,8 @@ def main() -> None:
                 print(f"{name}: consistent centres ({args.rounds} rounds) in {took:.1f} s")
             else:
                 print(f"{name}: too few presses for consistent centres")
+            if args.speed:
+                print(f"{name}: {speed(folder, opts)}")
             if args.rmse:
                 for k, v in held_out_rmse(folder, opts, ref).items():
                     print(f"{name}: {k}: " + (f"{v:.4f} mm" if "scored" in k else f"{v:.0f}"))
