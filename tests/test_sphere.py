@@ -10,10 +10,13 @@ import pytest
 from tests.test_calibration_data import sim_folder
 from vtsbench.depth.sphere import (
     Rim,
+    _best_of_starts,
     ball_radius_px,
     cap_depth_mm,
+    change_map,
     clamp_radius,
     detect_circle,
+    edge_support,
     fit_circle,
     ransac_circle,
     refine_circle,
@@ -169,6 +172,29 @@ def test_detect_circle_ignores_a_change_beside_the_contact() -> None:
     img[30:40, 76:84, 0] = 250  # beside the rim, up and right
     cx, cy, cr = detect_circle(img, bg, ball_px=18)
     assert math.hypot(cx - 60.37, cy - 50.81) < 0.5 and abs(cr - 14.6) < 0.6
+
+
+def test_edge_support_prefers_the_circle_on_the_rim() -> None:
+    bg, img = _rendered_press(60.37, 50.81, 14.6)
+    m = change_map(img, bg, 1.0)
+    true = edge_support(m, (60.37, 50.81, 14.6), 1.0)
+    assert true > 1.5 * edge_support(m, (63.0, 49.0, 14.6), 1.0)  # centre 3.2 px off
+    assert true > 1.5 * edge_support(m, (60.37, 50.81, 11.0), 1.0)  # inside the rim
+    assert edge_support(change_map(bg, bg, 1.0), (60.0, 50.0, 14.0), 1.0) == 0.0
+
+
+@pytest.mark.parametrize("x, y, r", [(60.37, 50.81, 14.6), (120.2, 48.6, 18.4)])
+def test_restarts_leave_the_rim_for_nothing_less(x, y, r) -> None:
+    """A circle off the ring is replaced by the restart that finds the ring (also cut by the
+    border); the circle on the ring stays (no restart gains a fifth of its support)."""
+    bg, img = _rendered_press(x, y, r)
+    m = change_map(img, bg, 1.0)
+    cx, cy, cr = _best_of_starts(m, (x - 2.5, y + 2.0, r - 2.0), 1.0, 3.0, 1.2 * r)
+    assert math.hypot(cx - x, cy - y) < 0.35 and abs(cr - r) < 0.5, (cx, cy, cr)
+    on = detect_circle(img, bg, ball_px=1.2 * r, restarts=False)
+    assert _best_of_starts(m, on, 1.0, 3.0, 1.2 * r) == on
+    assert detect_circle(img, bg, ball_px=1.2 * r) == on
+    assert _best_of_starts(m, None, 1.0, 3.0, 1.2 * r) is None
 
 
 def test_detect_circle_recovers_labelled_circles(sim) -> None:

@@ -619,6 +619,26 @@ def training_samples(presses: list[Press], background: np.ndarray, scale: tuple[
             np.concatenate(tgts).astype(np.float32), np.concatenate(caps))
 
 
+def fit_calibration(train: list[Press], background: np.ndarray, setup: dict[str, Any],
+                    method: str, *, rim: Rim, blur_px: float, rng: np.random.Generator,
+                    options: dict[str, Any] | None = None
+                    ) -> tuple[Calibration, tuple[np.ndarray, ...]]:
+    """A calibration fitted to training presses (setup: `load_presses`'s), with its samples
+    (colour, xy, target, is_cap): labels, colour clip, mapping and zero map."""
+    scale = setup["mm_per_px"]
+    colour, xy, target, is_cap = training_samples(train, background, scale, rim, blur_px, rng)
+    limit = float(min(255.0, np.percentile(np.abs(colour), 99.9) * 1.05 + 1.0))
+    np.clip(colour, -limit, limit, out=colour)
+    mapping = fit_mapping(method, colour, xy, target, **dict(options or {}))
+    h, w = setup["shape"]
+    zero = mapping.predict(np.zeros((h, w, 3), np.float32))
+    cal = Calibration(mapping=mapping, background=background, zero_map=zero,
+                      sensor=setup["sensor"], mm_per_px=scale,
+                      ball_radius_mm=setup["ball_radius_mm"], rim=rim, blur_px=blur_px,
+                      colour_limit_dn=limit, n_presses=len(train))
+    return cal, (colour, xy, target, is_cap)
+
+
 def evaluate_press(cal: Calibration, press: Press, *, solver: str = "dct",
                    held_out: bool = True) -> HeldOut:
     """Errors of one press: gradient RMSE over the trusted cap, depth errors of its integral."""
@@ -702,24 +722,17 @@ def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = 
     held_idx = sorted(rng.choice(n, k, replace=False).tolist()) if k else []
     train = [p for i, p in enumerate(presses) if i not in held_idx]
     held = [presses[i] for i in held_idx]
-    scale = setup["mm_per_px"]
     say(f"{n} presses ({sum(p.circle_source == 'detected' for p in presses)} circles detected), "
         f"{len(train)} to train, {len(held)} held out; background: {setup['background']}")
-    colour, xy, target, is_cap = training_samples(train, bg, scale, rim, blur_px, rng)
-    limit = float(min(255.0, np.percentile(np.abs(colour), 99.9) * 1.05 + 1.0))
-    np.clip(colour, -limit, limit, out=colour)
     opts = dict(options or {})
     if method == "mlp":
         opts.setdefault("seed", seed)
         opts.setdefault("device", device)
     t_fit = time.perf_counter()
-    mapping = fit_mapping(method, colour, xy, target, **opts)
+    cal, (colour, xy, target, is_cap) = fit_calibration(train, bg, setup, method, rim=rim,
+                                                        blur_px=blur_px, rng=rng, options=opts)
     fit_s = time.perf_counter() - t_fit
-    h, w = setup["shape"]
-    zero = mapping.predict(np.zeros((h, w, 3), np.float32))
-    cal = Calibration(mapping=mapping, background=bg, zero_map=zero, sensor=setup["sensor"],
-                      mm_per_px=scale, ball_radius_mm=setup["ball_radius_mm"], rim=rim,
-                      blur_px=blur_px, colour_limit_dn=limit, n_presses=len(train))
+    mapping, zero, (h, w) = cal.mapping, cal.zero_map, setup["shape"]
     # Training error as the file will answer: f(c, x, y) - f(0, x, y) at the samples.
     xi = np.clip(((xy[:, 0] + 1) / 2 * w).astype(np.int64), 0, w - 1)
     yi = np.clip(((xy[:, 1] + 1) / 2 * h).astype(np.int64), 0, h - 1)

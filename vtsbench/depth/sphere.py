@@ -267,7 +267,7 @@ def _ray_edges(m: np.ndarray, cx: float, cy: float, r_max: float, sigma: float,
 def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | None = None,
                   min_radius_px: float = 3.0,
                   start: tuple[float, float, float] | None = None,
-                  ball_px: float | None = None
+                  ball_px: float | None = None, restarts: bool = True
                   ) -> tuple[float, float, float] | None:
     """The contact circle (x, y, r) px of a ball press, or None when no contact is visible.
 
@@ -280,7 +280,9 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     new centre. ball_px (the ball radius in pixels, from the scale) bounds the radius at two
     ball radii (loose: a wrong scale is then reported by the circle's check, not as a missing
     contact). start: a first guess (x, y, r) instead of the component (what calibration
-    retries with when the first circle fails its check).
+    retries with when the first circle fails its check). restarts: fit again from 8 starts
+    around the circle and keep one that clearly more of the edge lies on (`_best_of_starts`;
+    False: the single fit, about 9 times faster).
     """
     import cv2
 
@@ -289,7 +291,8 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
         sigma = max(1.0, min(h, w) / 240)
     m = change_map(image, background, sigma)
     if start is not None:
-        return _fit_rays(m, *start, sigma, min_radius_px, ball_px)
+        found = _fit_rays(m, *start, sigma, min_radius_px, ball_px)
+        return _best_of_starts(m, found, sigma, min_radius_px, ball_px) if restarts else found
     med = float(np.median(m))
     mad = float(np.median(np.abs(m - med))) * 1.4826 + 1e-3
     peak = float(np.percentile(m, 99.99))
@@ -308,8 +311,46 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     cv2.fillConvexPoly(comp, cv2.convexHull(pts), 1)
     area = int(comp.sum())
     ys, xs = np.nonzero(comp)
-    return _fit_rays(m, float(xs.mean()), float(ys.mean()), math.sqrt(area / math.pi), sigma,
-                     min_radius_px, ball_px)
+    found = _fit_rays(m, float(xs.mean()), float(ys.mean()), math.sqrt(area / math.pi), sigma,
+                      min_radius_px, ball_px)
+    return _best_of_starts(m, found, sigma, min_radius_px, ball_px) if restarts else found
+
+
+#: Restarts around a found circle: 8 starts this fraction of its radius away, and the gain in
+#: edge support a restart's circle needs to replace it (see `_best_of_starts`).
+RESTART_FRAC, RESTART_GAIN = 0.15, 1.2
+
+
+def edge_support(m: np.ndarray, circle: tuple[float, float, float], sigma: float) -> float:
+    """The weight of the edge points, along rays from the circle's centre, that lie on it
+    (within the RANSAC tolerance): how much of the imprint's edge the circle explains."""
+    cx, cy, r = circle
+    px, py, wt = _ray_edges(m, cx, cy, 1.5 * r, sigma)
+    on = np.abs(np.hypot(px - cx, py - cy) - r) <= max(1.0, 0.06 * r)
+    return float(wt[on].sum())
+
+
+def _best_of_starts(m: np.ndarray, found: tuple[float, float, float] | None, sigma: float,
+                    min_radius_px: float, ball_px: float | None
+                    ) -> tuple[float, float, float] | None:
+    """The circle, of `found` and those fitted again from 8 starts around it (RESTART_FRAC of
+    its radius away), that the most edge weight lies on (`edge_support`); a restart replaces
+    `found` only with RESTART_GAIN times its support (gains of a few per cent are the rays
+    sampling other pixels). Where a bright lobe inside the contact gives a second, inner ring
+    of edge points on one side, the fit can settle on a circle through parts of both rings; a
+    restart settles on the full outer ring instead."""
+    if found is None:
+        return None
+    best, score = found, RESTART_GAIN * edge_support(m, found, sigma)
+    d = RESTART_FRAC * found[2]
+    for ang in np.arange(8) * (np.pi / 4):
+        c = _fit_rays(m, found[0] + d * math.cos(ang), found[1] + d * math.sin(ang), found[2],
+                      sigma, min_radius_px, ball_px)
+        if c is not None:
+            sc = edge_support(m, c, sigma)
+            if sc > score:
+                best, score = c, sc
+    return best
 
 
 def _fit_rays(m: np.ndarray, cx: float, cy: float, r0: float, sigma: float,
