@@ -67,15 +67,17 @@ class Run:
 
 #: The demo profile's configs (CPU, 2 cores, the whole `make demo` under 15 minutes).
 DEMO_TSF = {"config": "small", "modality": "rgb", "image_size": 64, "crop_px": 256,
-            "input": "frames+delta+flow", "steps": 300, "batch_size": 8,
+            "input": "delta+flow", "flow": "shift", "flow_soft_px": 0.5, "pool": "cls+mean",
+            "steps": 300, "batch_size": 8,
             "checkpoint_every": 100, "fit_parts": ["train", "val"]}
-DEMO_RESNET = {"arch": "resnet18", "image_size": 96, "crop_px": 320, "steps": 300,
+DEMO_RESNET = {"arch": "resnet18", "image_size": 128, "crop_px": 320, "steps": 300,
                "batch_size": 16, "checkpoint_every": 100, "gradcam": 4,
                "fit_parts": ["train", "val"]}
 #: The results profile (paper scale: ~8,000 sequences, ~19,000 static frames, paper-size
 #: models): steps on a GPU, and the fewer steps it falls back to on a CPU (the page says so).
 PAPER_TSF = {"config": "paper", "modality": "rgb", "crop_px": 256,
-             "input": "frames+delta+flow", "batch_size": 16,
+             "input": "delta+flow", "flow": "shift", "flow_soft_px": 0.5, "pool": "cls+mean",
+             "batch_size": 16,
              "lr": 1e-4, "warmup_steps": 200, "checkpoint_every": 500, "threads": None}
 PAPER_RESNET = {"arch": "resnet50", "image_size": 224, "crop_px": 320, "batch_size": 32,
                 "checkpoint_every": 500, "gradcam": 8, "threads": None}

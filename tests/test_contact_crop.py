@@ -149,7 +149,7 @@ def moving_bar(dx: float, dy_rows: float, t: int = 5, h: int = 96, w: int = 128)
     ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
     out = []
     for k in range(t):
-        cx, cy = 60 + dx * k / (t - 1), 48 + dy_rows * k / (t - 1)
+        cx, cy = w / 2 - 4 + dx * k / (t - 1), h / 2 + dy_rows * k / (t - 1)
         inside = (np.abs(xs - cx) < 40) & (np.abs(ys - cy) < 6)
         tex = 0.5 + 0.5 * np.sin(0.8 * (xs - cx) + 0.3 * (ys - cy))
         img = np.where(inside, 70 + 140 * tex, 40)
@@ -189,7 +189,7 @@ def test_shift_channels_follow_the_motion_of_an_elongated_imprint() -> None:
     # channels the whole displacement, in pixels at the model's input, compressed
     from vtsbench.models.contact_crop import FLOW_SOFT_PX
 
-    seq = moving_bar(10.0, 0.0)
+    seq = moving_bar(10.0, 0.0, h=160, w=200)
     x, (sx, _) = contact_crop({"rgb": seq}, 96, 48, "rgb", flow="shift")
     assert x.shape == (5, 5, 48, 48)
     f = x[-1, 3:]

@@ -78,13 +78,19 @@ def test_delta_input_and_input_modes() -> None:
         input_mode({**small, "input": "optical"})
     with pytest.raises(VtsError, match="crop_px"):
         input_mode({**small, "input": "frames+flow", "crop_px": None})
-    crop = {**small, "input": None, "crop_px": 16}
-    assert input_mode(crop) == "frames+delta+flow"
+    crop = {**small, "input": "frames+delta+flow", "crop_px": 16}
     x5 = torch.rand(2, 4, 5, 8, 8)
     out = _normalize(x5, crop)
     assert out.shape == (2, 4, 8, 8, 8)
     assert torch.equal(out[:, :, 6:], x5[:, :, 3:]) and torch.equal(out[:, :, :3],
                                                                     (x5[:, :, :3] - 0.5) / 0.5)
+    # the default on crops: each frame's difference to the first, then the motion channels
+    crop = {**small, "input": None, "crop_px": 16}
+    assert input_mode(crop) == "delta+flow"
+    out = _normalize(x5, crop)
+    assert out.shape == (2, 4, 5, 8, 8)
+    assert torch.equal(out[:, :, :3], _normalize(x5[:, :, :3], {**small, "input": "delta"}))
+    assert torch.equal(out[:, :, 3:], x5[:, :, 3:])
 
 
 def test_slip_oversample_must_be_positive(vts_dataset: Path, tmp_path: Path) -> None:

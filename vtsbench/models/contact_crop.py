@@ -105,13 +105,15 @@ MOTION_PX = 480
 
 
 def contact_crop(sample: dict[str, Any], crop_px: int, size: int, modality: str,
-                 flow: str | None = None) -> tuple[np.ndarray, tuple[float, float]]:
+                 flow: str | None = None, soft_px: float = FLOW_SOFT_PX
+                 ) -> tuple[np.ndarray, tuple[float, float]]:
     """A sample's sequence cut around its contact: (T, C, size, size) float32 (rgb in [0, 1],
     then depth in mm for rgbd; depth alone for depth; with `flow`, two more channels of motion
     from the first frame: `shift`, the phase-correlation displacement of the moving gel drawn
     over where it moves (`vtsbench.models.motion.shift_field`), or `dis`, the dense DIS optical
     flow of the crop (`crop_flow`), both in pixels at the model's input, radially compressed)
-    and the model-input pixels per sensor pixel (x, y)."""
+    and the model-input pixels per sensor pixel (x, y). `soft_px`: the length (pixels at the
+    model's input) where the compression of the `shift` channels bends (`compress_flow`)."""
     import cv2
 
     if flow not in (None, *FLOWS):
@@ -144,7 +146,7 @@ def contact_crop(sample: dict[str, Any], crop_px: int, size: int, modality: str,
             field[:, y0:y0 + side, x0:x0 + side] = shift_field(
                 grey[:, y0:y0 + side, x0:x0 + side]).transpose(0, 2, 3, 1)  # sensor px
             cut = crop_sequence(field, box, size).transpose(0, 3, 1, 2)
-            parts.append(compress_flow(cut * scale))
+            parts.append(compress_flow(cut * scale, soft_px))
     return np.concatenate(parts, axis=1), (scale, scale)
 
 

@@ -6,9 +6,10 @@ global token, trained with the masked joint loss L = L_state + lambda * 1[state 
 through `vtsbench.training.train_loop` (seeded batches, safetensors checkpoints, exact resume,
 mixed precision on CUDA, DDP under torchrun). Configs: `small` (random init, trains on a CPU in
 minutes) and `paper` (base, 224x224, 8 frames, from `facebook/timesformer-base-finetuned-ssv2`
-on disk). Inputs: rgb, depth or rgbd, cut around the contact (`crop_px`), each frame with its
-difference to the first and two channels of optical flow from the first frame (`input`), trained
-with the 8 label-mapped symmetries of the square crop. The checkpoint holds the weights and, in
+on disk). Inputs: rgb, depth or rgbd, cut around the contact (`crop_px`): by default each
+frame's difference to the first and two motion channels, the phase-correlation displacement of
+the moving gel from the first frame (`input`, `flow`; `vtsbench.models.motion`), trained with
+the 8 label-mapped symmetries of the square crop. The checkpoint holds the weights and, in
 its metadata, the recipe's config, so `predict` rebuilds the same model.
 """
 
@@ -41,16 +42,15 @@ def _frames(x: Any, modality: str, depth_scale_mm: float) -> Any:
     return out
 
 
-INPUTS = ("frames", "delta", "frames+delta", "frames+flow", "frames+delta+flow")
+INPUTS = ("frames", "delta", "frames+delta", "frames+flow", "frames+delta+flow", "delta+flow")
 
 
 def input_mode(config: dict[str, Any]) -> str:
-    """`input` of a config; null: `frames+delta+flow` on contact crops, else `frames+delta` (each
-    frame and its difference to the first).
-    The `+flow` modes add two channels of optical flow from the first frame (contact crops
-    only, `crop_px`)."""
-    mode = config.get("input") or ("frames+delta+flow" if config.get("crop_px") else
-                                   "frames+delta")
+    """`input` of a config; null: `delta+flow` on contact crops (each frame's difference to the
+    first and two motion channels), else `frames+delta` (each frame and its difference).
+    The `+flow` modes add two channels of motion from the first frame (contact crops only,
+    `crop_px`; `flow` says which)."""
+    mode = config.get("input") or ("delta+flow" if config.get("crop_px") else "frames+delta")
     if mode not in INPUTS:
         raise VtsError(f"input must be one of {', '.join(INPUTS)}, not {mode!r}")
     if mode.endswith("+flow") and not config.get("crop_px"):
@@ -87,7 +87,7 @@ def _normalize(x: Any, config: dict[str, Any]) -> Any:
     if mode.endswith("+flow"):  # the last two channels: flow, already scaled (crop_flow)
         x, flow = x[:, :, :-2], x[:, :, -2:]
     x = _frames(x, config["modality"], float(config["depth_scale_mm"]))
-    parts = [] if mode == "delta" else [x]
+    parts = [] if mode.startswith("delta") else [x]
     if "delta" in mode:
         parts.append(((x - x[:, :1]) * float(config.get("delta_gain", 4.0))).clamp(-1.0, 1.0))
     if flow is not None:
@@ -121,7 +121,8 @@ class CropData(CachedItems):
 
         s = self.view[i]
         x, self.scale = contact_crop(s, int(self.config["crop_px"]), self.size,
-                                     self.config["modality"], flow=flow_kind(self.config))
+                                     self.config["modality"], flow=flow_kind(self.config),
+                                     soft_px=float(self.config.get("flow_soft_px") or 2.0))
         x = x[self.frame_numbers(len(x), self.frames)]
         state = -1 if s.get("state_idx") is None else int(s["state_idx"])
         direction = -1 if s.get("direction") is None else int(s["direction"])
@@ -149,12 +150,15 @@ class TimesformerRecipe(Recipe):
             "slip_oversample": 3,       # draw slipping training sequences this many times
             "fit_parts": ["train"],     # parts of the split trained on (never test)
             "input": None,              # frames | delta (each frame minus the first) |
-                                        # frames+delta | frames+flow | frames+delta+flow
-                                        # (None: frames+delta+flow with crop_px)
+                                        # frames+delta | frames+flow | frames+delta+flow |
+                                        # delta+flow (None: delta+flow with crop_px)
             "pool": "cls+mean",         # what the heads read: cls | cls+mean (checkpoints
                                         # without the key: cls)
             "flow": "shift",            # the +flow channels: shift (phase correlation of
                                         # the moving gel) | dis (dense optical flow)
+            "flow_soft_px": 0.5,        # shift channels: length (px at the model's input)
+                                        # where tanh compression bends (checkpoints without
+                                        # the key: 2.0)
             "delta_gain": 4.0,          # delta input: gain before clipping to [-1, 1]
             "crop_px": 320,             # square of this many sensor px around the contact,
                                         # resized to image_size; None: the whole frame
