@@ -334,7 +334,8 @@ def render(rows: list[dict[str, Any]], paper_rows: list[dict[str, Any]], info: d
         f"Synthetic benchmark: `{info['dataset_name']}` built from `vtsbench simulate` "
         f"({info['dataset_desc']}), dataset_sha256 `{info['dataset_sha'][:16]}...`. "
         "Accuracy on the split's `test` part, one seed; latency per sample with a batch of one "
-        "(median; forward pass only, reading excluded; flow: flow, features and tree). "
+        "(median; reading excluded; flow: flow, features and tree; TimeSformer: crop, motion "
+        "channels and forward pass; ResNet: forward pass). "
         "The paper's figures are on its own real recordings (83,000 RGB-D frames, "
         "ImageNet/SSv2-pretrained models), so they are a reference row, not a comparable entry.",
         "",
