@@ -97,6 +97,19 @@ def crop_flow(grey: np.ndarray, size: int) -> np.ndarray:
 FLOWS = ("dis", "shift")
 
 
+def _grey(sample: dict[str, Any], modality: str, box: tuple[int, int, int]) -> np.ndarray:
+    """(T, side, side) uint8 grey levels inside box at sensor resolution, what the motion
+    channels are measured on: the frames' grey, or for depth alone the depth maps scaled from
+    0 to the deepest point in the box."""
+    import cv2
+
+    if modality == "depth":
+        d = crop_sequence(np.asarray(sample["depth"], dtype=np.float32), box, box[2])
+        return np.clip(255 * d / max(float(d.max()), 1e-6), 0, 255).astype(np.uint8)
+    return np.stack([cv2.cvtColor(f, cv2.COLOR_RGB2GRAY)
+                     for f in crop_sequence(sample["rgb"], box, box[2])])
+
+
 #: Side (sensor px) of the square around the contact where the `shift` channels are measured:
 #: the whole moving imprint, also when it is larger than the model's crop. On the demo's
 #: slipping sequences (unseen_objects, train / test) the phase correlation of the first and last
@@ -114,8 +127,6 @@ def contact_crop(sample: dict[str, Any], crop_px: int, size: int, modality: str,
     flow of the crop (`crop_flow`), both in pixels at the model's input, radially compressed)
     and the model-input pixels per sensor pixel (x, y). `soft_px`: the length (pixels at the
     model's input) where the compression of the `shift` channels bends (`compress_flow`)."""
-    import cv2
-
     if flow not in (None, *FLOWS):
         raise ValueError(f"flow must be one of {FLOWS} or None, not {flow!r}")
     rgb = sample["rgb"]
@@ -129,24 +140,16 @@ def contact_crop(sample: dict[str, Any], crop_px: int, size: int, modality: str,
         d = crop_sequence(np.asarray(sample["depth"], dtype=np.float32), box, size)
         parts.append(d[:, None])
     scale = size / box[2]
-    if flow:
-        if modality == "depth":  # the depth maps as grey levels (0 to the deepest point)
-            d = np.asarray(sample["depth"], dtype=np.float32)
-            grey = np.clip(255 * d / max(float(d.max()), 1e-6), 0, 255).astype(np.uint8)
-        else:
-            grey = np.stack([cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for f in rgb])
-        if flow == "dis":
-            parts.append(crop_flow(crop_sequence(grey, box, box[2]), size))
-        else:
-            from vtsbench.models.motion import shift_field
+    if flow == "dis":
+        parts.append(crop_flow(_grey(sample, modality, box), size))
+    elif flow == "shift":
+        from vtsbench.models.motion import shift_field
 
-            # the square holds `box` (the same centre, larger, both inside the frame)
-            x0, y0, side = crop_box(center, max(MOTION_PX, crop_px), rgb.shape[1:3])
-            field = np.zeros((len(grey), grey.shape[1], grey.shape[2], 2), np.float32)
-            field[:, y0:y0 + side, x0:x0 + side] = shift_field(
-                grey[:, y0:y0 + side, x0:x0 + side]).transpose(0, 2, 3, 1)  # sensor px
-            cut = crop_sequence(field, box, size).transpose(0, 3, 1, 2)
-            parts.append(compress_flow(cut * scale, soft_px))
+        # a larger square around the same centre, which holds `box` (both inside the frame)
+        x0, y0, side = crop_box(center, max(MOTION_PX, crop_px), rgb.shape[1:3])
+        field = shift_field(_grey(sample, modality, (x0, y0, side))).transpose(0, 2, 3, 1)
+        cut = crop_sequence(field, (box[0] - x0, box[1] - y0, box[2]), size)  # sensor px
+        parts.append(compress_flow(cut.transpose(0, 3, 1, 2) * scale, soft_px))
     return np.concatenate(parts, axis=1), (scale, scale)
 
 

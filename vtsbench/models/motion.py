@@ -47,19 +47,22 @@ def shift_scale(shape: tuple[int, int], scale: float) -> float:
     return float(min(1.0, max(scale, MIN_SHIFT_SIDE / max(1, min(shape)))))
 
 
-def frame_shifts(gray: list[np.ndarray], window: np.ndarray | None) -> np.ndarray:
-    """(T, 2) float32: the displacement (x right, y down the rows, pixels of the input) of each
-    float32 grey frame from the first, by phase correlation inside `window`; row 0 and every
-    row of a sequence where nothing moves (`window` None) are 0."""
+def frame_shifts(gray: list[np.ndarray], window: np.ndarray | None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The displacement (x right, y down the rows, pixels of the input) of each float32 grey
+    frame from the first, by phase correlation inside `window`: (T, 2) float64 shifts (row 0
+    and every row of a sequence where nothing moves, `window` None, are 0) and the (T - 1,)
+    correlation peaks of the later frames (0 where nothing moves)."""
     import cv2
 
-    out = np.zeros((len(gray), 2), np.float32)
+    shifts = np.zeros((len(gray), 2))
+    peaks = np.zeros(max(0, len(gray) - 1))
     if window is None:
-        return out
+        return shifts, peaks
     for t in range(1, len(gray)):
-        (sx, sy), _ = cv2.phaseCorrelate(gray[0], gray[t], window)
-        out[t] = sx, sy
-    return out
+        (sx, sy), peaks[t - 1] = cv2.phaseCorrelate(gray[0], gray[t], window)
+        shifts[t] = sx, sy
+    return shifts, peaks
 
 
 def shift_field(grey: np.ndarray, scale: float = 1.0) -> np.ndarray:
@@ -81,7 +84,7 @@ def shift_field(grey: np.ndarray, scale: float = 1.0) -> np.ndarray:
     out = np.zeros((len(grey), 2, h, w), np.float32)
     if win is None:
         return out
-    shifts = frame_shifts(gray, win) / s
+    shifts = frame_shifts(gray, win)[0].astype(np.float32) / s
     full = cv2.resize(win, (w, h), interpolation=cv2.INTER_LINEAR)
     full /= max(float(full.max()), 1e-6)
     out[:] = shifts[:, :, None, None] * full[None, None]

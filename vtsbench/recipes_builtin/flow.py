@@ -26,7 +26,7 @@ import numpy as np
 
 from vtsbench.errors import VtsError
 from vtsbench.labels import N_DIRECTIONS, STATES, angle_to_class
-from vtsbench.models.motion import motion_window, shift_scale
+from vtsbench.models.motion import frame_shifts, motion_window, shift_scale
 from vtsbench.recipes import Recipe, progress_iter
 
 FEATURES = ("mag_mean", "mag_p90", "net", "coherence", "div_mean", "div_abs", "mag_late_ratio",
@@ -87,13 +87,9 @@ def global_shift(frames: np.ndarray, scale: float = 1.0, slope: bool = False
     if not slope:
         (sx, sy), r = cv2.phaseCorrelate(g[0], g[-1], win)
         return float(sx) / scale, float(sy) / scale, float(r)
-    shifts, peaks = [], []
-    for later in g[1:]:
-        (sx, sy), r = cv2.phaseCorrelate(g[0], later, win)
-        shifts.append((sx, sy))
-        peaks.append(r)
+    shifts, peaks = frame_shifts(g, win)
     k = np.arange(1, len(g), dtype=np.float64)
-    v = (k[:, None] * np.asarray(shifts)).sum(0) / (k**2).sum() * (len(g) - 1)
+    v = (k[:, None] * shifts[1:]).sum(0) / (k**2).sum() * (len(g) - 1)
     return float(v[0]) / scale, float(v[1]) / scale, float(np.mean(peaks))
 
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from vtsbench.errors import VtsError
 from vtsbench.labels import STATES
-from vtsbench.models.contact_crop import FLOWS, CachedItems
+from vtsbench.models.contact_crop import FLOW_SOFT_PX, FLOWS, CachedItems
 from vtsbench.recipes import Recipe, fit_view, progress_iter
 
 MODALITIES = ("rgb", "depth", "rgbd")
@@ -124,7 +124,8 @@ class CropData(CachedItems):
         t0 = time.perf_counter()
         x, self.scale = contact_crop(s, int(self.config["crop_px"]), self.size,
                                      self.config["modality"], flow=flow_kind(self.config),
-                                     soft_px=float(self.config.get("flow_soft_px") or 2.0))
+                                     soft_px=float(self.config.get("flow_soft_px")
+                                                   or FLOW_SOFT_PX))
         self.prep_s = time.perf_counter() - t0  # the crop and its motion channels
         x = x[self.frame_numbers(len(x), self.frames)]
         state = -1 if s.get("state_idx") is None else int(s["state_idx"])
