@@ -31,18 +31,11 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes | Sequence[bytes]) -
     Unlike mkstemp the file gets the ordinary permissions (umask), so a shared dataset is
     readable by others; a temporary left by a killed process ends in TMP_SUFFIX.
     """
-    path = Path(path)
-    tmp = temporary_name(path)
-    try:
-        with open(tmp, "xb") as fh:
-            if isinstance(data, (bytes, bytearray, memoryview)):
-                fh.write(data)
-            else:
-                fh.writelines(data)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with replacing(path) as tmp, open(tmp, "xb") as fh:
+        if isinstance(data, (bytes, bytearray, memoryview)):
+            fh.write(data)
+        else:
+            fh.writelines(data)
 
 
 @contextlib.contextmanager
