@@ -284,15 +284,20 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     around the circle and keep one that clearly more of the edge lies on (`_best_of_starts`;
     False: the single fit, about 9 times faster).
     """
+    if sigma is None:
+        sigma = default_sigma(image.shape[:2])
+    m = change_map(image, background, sigma)
+    found = (_fit_rays(m, *start, sigma, min_radius_px, ball_px) if start is not None else
+             _component_fit(m, sigma, min_radius_px, ball_px))
+    return _best_of_starts(m, found, sigma, min_radius_px, ball_px) if restarts else found
+
+
+def _component_fit(m: np.ndarray, sigma: float, min_radius_px: float, ball_px: float | None
+                   ) -> tuple[float, float, float] | None:
+    """The circle fitted from the largest strong-change component of the change map `m` (its
+    convex hull's centroid and equal-area radius as the start), or None without one."""
     import cv2
 
-    h, w = image.shape[:2]
-    if sigma is None:
-        sigma = max(1.0, min(h, w) / 240)
-    m = change_map(image, background, sigma)
-    if start is not None:
-        found = _fit_rays(m, *start, sigma, min_radius_px, ball_px)
-        return _best_of_starts(m, found, sigma, min_radius_px, ball_px) if restarts else found
     med = float(np.median(m))
     mad = float(np.median(np.abs(m - med))) * 1.4826 + 1e-3
     peak = float(np.percentile(m, 99.99))
@@ -311,9 +316,8 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     cv2.fillConvexPoly(comp, cv2.convexHull(pts), 1)
     area = int(comp.sum())
     ys, xs = np.nonzero(comp)
-    found = _fit_rays(m, float(xs.mean()), float(ys.mean()), math.sqrt(area / math.pi), sigma,
-                      min_radius_px, ball_px)
-    return _best_of_starts(m, found, sigma, min_radius_px, ball_px) if restarts else found
+    return _fit_rays(m, float(xs.mean()), float(ys.mean()), math.sqrt(area / math.pi), sigma,
+                     min_radius_px, ball_px)
 
 
 #: Restarts around a found circle: 8 starts this fraction of its radius away, and the gain in
@@ -321,12 +325,18 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
 RESTART_FRAC, RESTART_GAIN = 0.15, 1.2
 
 
+def ring_tol(r: float) -> float:
+    """How far (px) an edge point may lie from a circle of radius r and still be on it: the
+    RANSAC inlier tolerance of `_fit_rays`, and what `edge_support` counts."""
+    return max(1.0, 0.06 * r)
+
+
 def edge_support(m: np.ndarray, circle: tuple[float, float, float], sigma: float) -> float:
     """The weight of the edge points, along rays from the circle's centre, that lie on it
     (within the RANSAC tolerance): how much of the imprint's edge the circle explains."""
     cx, cy, r = circle
     px, py, wt = _ray_edges(m, cx, cy, 1.5 * r, sigma)
-    on = np.abs(np.hypot(px - cx, py - cy) - r) <= max(1.0, 0.06 * r)
+    on = np.abs(np.hypot(px - cx, py - cy) - r) <= ring_tol(r)
     return float(wt[on].sum())
 
 
@@ -365,8 +375,7 @@ def _fit_rays(m: np.ndarray, cx: float, cy: float, r0: float, sigma: float,
         px, py, wt = _ray_edges(m, cx, cy, 1.5 * max(r0, r), sigma)
         if px.size < 12:
             return None
-        tol = max(1.0, 0.06 * r)
-        found = ransac_circle(px, py, wt, r_range=(min_radius_px, r_hi), tol=tol)
+        found = ransac_circle(px, py, wt, r_range=(min_radius_px, r_hi), tol=ring_tol(r))
         if found is None or found[1].sum() < 12:
             return None
         cx, cy, r = found[0]
@@ -395,16 +404,17 @@ def _change_threshold(m: np.ndarray) -> tuple[float, float]:
             max(med + 4 * mad, med + 0.05 * (peak - med), med + 2.0))
 
 
-def change_support(image: np.ndarray, background: np.ndarray, sigma: float | None = None
-                   ) -> tuple[float, float, float] | None:
-    """The imprint as the colour change shows it: (x, y, r) of the largest region whose change
-    stands above the noise (r: the radius of a disc of its area), or None if there is none."""
+def default_sigma(shape: tuple[int, int]) -> float:
+    """The smoothing (px) of the change map for an image of this (H, W): 1 px per 240 of the
+    shorter side, at least 1."""
+    return max(1.0, min(shape) / 240)
+
+
+def _largest_change(m: np.ndarray, loose: float) -> tuple[float, float, float] | None:
+    """(x, y, r) of the largest region of the change map `m` above `loose` (r: the radius of a
+    disc of its area), or None if there is none."""
     import cv2
 
-    h, w = image.shape[:2]
-    sigma = max(1.0, min(h, w) / 240) if sigma is None else sigma
-    m = change_map(image, background, sigma)
-    _, loose = _change_threshold(m)
     n, _, stats, cent = cv2.connectedComponentsWithStats((m > loose).astype(np.uint8),
                                                          connectivity=8)
     if n <= 1:
@@ -412,6 +422,15 @@ def change_support(image: np.ndarray, background: np.ndarray, sigma: float | Non
     best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     area = float(stats[best, cv2.CC_STAT_AREA])
     return float(cent[best, 0]), float(cent[best, 1]), math.sqrt(area / math.pi)
+
+
+def change_support(image: np.ndarray, background: np.ndarray, sigma: float | None = None
+                   ) -> tuple[float, float, float] | None:
+    """The imprint as the colour change shows it: (x, y, r) of the largest region whose change
+    stands above the noise (r: the radius of a disc of its area), or None if there is none."""
+    sigma = default_sigma(image.shape[:2]) if sigma is None else sigma
+    m = change_map(image, background, sigma)
+    return _largest_change(m, _change_threshold(m)[1])
 
 
 def circle_doubts(circle: tuple[float, float, float], image: np.ndarray, background: np.ndarray,
@@ -428,14 +447,14 @@ def circle_doubts(circle: tuple[float, float, float], image: np.ndarray, backgro
         out.append(f"centre ({x:.1f}, {y:.1f}) lies outside the {h}x{w} image")
     if r > 1.3 * ball_px:
         out.append(f"radius {r:.1f} px is larger than the ball ({ball_px:.1f} px)")
-    sup = change_support(image, background)
+    m = change_map(image, background, default_sigma((h, w)))
+    _, loose = _change_threshold(m)
+    sup = _largest_change(m, loose)  # what change_support gives, from the same map
     if sup is None:
         return [*out, "no visible colour change"]
     sr = sup[2]
     if not SUPPORT_LOW * sr <= r <= SUPPORT_HIGH * sr:
         out.append(f"radius {r:.1f} px, but the colour change covers about {sr:.1f} px")
-    m = change_map(image, background, max(1.0, min(h, w) / 240))
-    _, loose = _change_threshold(m)
     yy, xx = np.ogrid[:h, :w]
     disc = (xx - x) ** 2 + (yy - y) ** 2 <= r * r
     cover = float((m[disc] > loose).mean()) if disc.any() else 0.0
