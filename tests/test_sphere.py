@@ -18,6 +18,7 @@ from vtsbench.depth.sphere import (
     detect_circle,
     edge_support,
     fit_circle,
+    imprint_lobes,
     ransac_circle,
     refine_circle,
     sphere_fields,
@@ -172,6 +173,51 @@ def test_detect_circle_ignores_a_change_beside_the_contact() -> None:
     img[30:40, 76:84, 0] = 250  # beside the rim, up and right
     cx, cy, cr = detect_circle(img, bg, ball_px=18)
     assert math.hypot(cx - 60.37, cy - 50.81) < 0.5 and abs(cr - 14.6) < 0.6
+
+
+def _banded_press(x: float, y: float, r: float, h: int = 96, w: int = 128, ss: int = 8
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """A press lit along the rows only: the change follows the slope down the rows, so it is
+    zero along the row through the apex and comes in two lobes (one dimmer) with a dark band
+    between them, brightest inside the rim and fading over a skirt outside it."""
+    yy, xx = np.mgrid[:h * ss, :w * ss]
+    xx = (xx + 0.5) / ss - 0.5
+    yy = (yy + 0.5) / ss - 0.5
+    rho = np.hypot(xx - x, yy - y)
+    sin = (yy - y) / np.maximum(rho, 1e-9)
+    lobe = np.where(rho < r, np.exp(-(((rho - 0.7 * r) / (0.35 * r)) ** 2)),
+                    math.exp(-((0.3 / 0.35) ** 2)) * np.exp(-(rho - r) / (0.25 * r)))
+    change = 110 * np.sign(sin) * np.abs(sin) ** 1.5 * lobe * np.where(sin < 0, 1.0, 0.6)
+    change = change.reshape(h, ss, w, ss).mean(axis=(1, 3))
+    bg = np.full((h, w, 3), 110.0)
+    img = bg.copy()
+    img[..., 0] += change
+    img[..., 2] -= 0.8 * change
+    img += np.random.default_rng(1).normal(0, 1.0, img.shape)
+    return bg.astype(np.uint8), np.clip(img, 0, 255).round().astype(np.uint8)
+
+
+@pytest.mark.parametrize("x, y, r", [(60.37, 50.81, 14.6), (41.5, 44.25, 23.3),
+                                     (70.2, 48.6, 18.4)])
+def test_detect_circle_joins_the_two_halves_of_a_banded_imprint(x, y, r) -> None:
+    """A dark band through the apex splits the strong change in two: the circle is found from
+    both halves, not around the larger one (which alone gave circles of a quarter of the radius
+    10-15 px off the centre)."""
+    bg, img = _banded_press(x, y, r)
+    m = change_map(img, bg, 1.0)
+    lobes = imprint_lobes(m, 3.0)
+    assert lobes is not None
+    ys = np.nonzero(lobes)[0]
+    assert ys.min() < y - 0.3 * r and ys.max() > y + 0.3 * r  # both halves
+    for restarts in (True, False):
+        cx, cy, cr = detect_circle(img, bg, ball_px=1.6 * r, restarts=restarts)
+        assert math.hypot(cx - x, cy - y) < 0.5 and 0.8 * r < cr < 1.1 * r, (cx, cy, cr)
+    # a change of the same size far off is not joined: the circle stays on the imprint
+    far = img.copy()
+    patch = far[4:14, 110:122].astype(int) + np.array([90, 0, -70])
+    far[4:14, 110:122] = np.clip(patch, 0, 255)
+    cx, cy, _ = detect_circle(far, bg, ball_px=1.6 * r)
+    assert math.hypot(cx - x, cy - y) < 0.5
 
 
 def test_edge_support_prefers_the_circle_on_the_rim() -> None:

@@ -19,11 +19,11 @@ down into a skirt whose shape the sphere does not describe. A circle radius of a
 `max_radius_frac` of the ball radius (hand-marked circles are often a little too large) is
 clamped to it before taking sqrt(R^2 - r^2), so every value is finite.
 
-`detect_circle` finds an unlabelled contact from the difference to the no-contact background:
-blur, threshold above the noise, largest component for a first centre, then sub-pixel edge points
-along rays from it (the steepest fall of the change past its peak: the colour changes most where
-the cap is steepest, at its rim), a RANSAC circle with the ball's size as a prior, and a weighted
-geometric least-squares fit to its inliers.
+`detect_circle` finds an unlabelled contact from the difference to the no-contact background: blur,
+threshold above the noise, the largest component and the lobes beside it for a first centre, then
+sub-pixel edge points along rays from it (the steepest fall of the change past its peak: the colour
+changes most where the cap is steepest, at its rim), a RANSAC circle with the ball's size as a
+prior, and a weighted geometric least-squares fit to its inliers.
 """
 
 from __future__ import annotations
@@ -271,18 +271,18 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
                   ) -> tuple[float, float, float] | None:
     """The contact circle (x, y, r) px of a ball press, or None when no contact is visible.
 
-    Blur the change to the background, keep what stands clearly above the noise (6 robust
-    standard deviations and a fifth of the strongest change), take the convex hull of the
-    largest connected component (the flat top of the cap barely changes colour) for a first
-    centre and size, then find sub-pixel edge points along rays from the centre (`_ray_edges`)
-    and fit a circle to them: RANSAC against rays that cross a shadow or a neighbouring
-    change, then a weighted geometric least-squares fit to the inliers, three times from the
-    new centre. ball_px (the ball radius in pixels, from the scale) bounds the radius at two
-    ball radii (loose: a wrong scale is then reported by the circle's check, not as a missing
-    contact). start: a first guess (x, y, r) instead of the component (what calibration
-    retries with when the first circle fails its check). restarts: fit again from 8 starts
-    around the circle and keep one that clearly more of the edge lies on (`_best_of_starts`;
-    False: the single fit, about 9 times faster).
+    Blur the change to the background, keep what stands clearly above the noise (6 robust standard
+    deviations and a fifth of the strongest change), take the convex hull of the largest connected
+    component and the lobes beside it (`imprint_lobes`; the flat top of the cap barely changes
+    colour) for a first centre and size, then find sub-pixel edge points along rays from the centre
+    (`_ray_edges`) and fit a circle to them: RANSAC against rays that cross a shadow or a
+    neighbouring change, then a weighted geometric least-squares fit to the inliers, three times
+    from the new centre. ball_px (the ball radius in pixels, from the scale) bounds the radius at
+    two ball radii (loose: a wrong scale is then reported by the circle's check, not as a missing
+    contact). start: a first guess (x, y, r) instead of the component (what calibration retries with
+    when the first circle fails its check). restarts: fit again from 8 starts around the circle and
+    keep one that clearly more of the edge lies on (`_best_of_starts`; False: the single fit, about
+    9 times faster).
     """
     if sigma is None:
         sigma = default_sigma(image.shape[:2])
@@ -294,30 +294,59 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
 
 def _component_fit(m: np.ndarray, sigma: float, min_radius_px: float, ball_px: float | None
                    ) -> tuple[float, float, float] | None:
-    """The circle fitted from the largest strong-change component of the change map `m` (its
-    convex hull's centroid and equal-area radius as the start), or None without one."""
+    """The circle fitted from the strong-change components of the change map `m` (the convex
+    hull of the imprint's lobes, `imprint_lobes`: its centroid and equal-area radius as the
+    start), or None without one."""
     import cv2
 
-    med = float(np.median(m))
-    mad = float(np.median(np.abs(m - med))) * 1.4826 + 1e-3
-    peak = float(np.percentile(m, 99.99))
-    thr = max(med + 6 * mad, med + 0.2 * (peak - med), med + 3.0)
-    mask = m > thr
-    n, lab, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
-    if n <= 1:
-        return None
-    best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-    if stats[best, cv2.CC_STAT_AREA] < math.pi * min_radius_px**2:
+    comp = imprint_lobes(m, min_radius_px)
+    if comp is None:
         return None
     # The flat top of the cap and the side facing away from the lights change little, so the
-    # component can be a ring or a crescent: its convex hull stands for the contact.
-    pts = np.column_stack(np.nonzero(lab == best)[::-1]).astype(np.int32)
-    comp = np.zeros(m.shape, np.uint8)
-    cv2.fillConvexPoly(comp, cv2.convexHull(pts), 1)
-    area = int(comp.sum())
-    ys, xs = np.nonzero(comp)
+    # lobes can form a ring, a crescent or two halves: their convex hull stands for the contact.
+    pts = np.column_stack(np.nonzero(comp)[::-1]).astype(np.int32)
+    hull = np.zeros(m.shape, np.uint8)
+    cv2.fillConvexPoly(hull, cv2.convexHull(pts), 1)
+    area = int(hull.sum())
+    ys, xs = np.nonzero(hull)
     return _fit_rays(m, float(xs.mean()), float(ys.mean()), math.sqrt(area / math.pi), sigma,
                      min_radius_px, ball_px)
+
+
+#: A strong-change component joins the largest one as a lobe of the same imprint when it has at
+#: least LOBE_MIN_FRAC of its area and lies within LOBE_GAP times its equal-area radius of it.
+LOBE_MIN_FRAC, LOBE_GAP = 0.25, 1.0
+
+
+def imprint_lobes(m: np.ndarray, min_radius_px: float) -> np.ndarray | None:
+    """The pixels of the imprint's strong change (bool H x W): the largest component above the
+    strict threshold and every other one of at least LOBE_MIN_FRAC of its area within LOBE_GAP
+    of its equal-area radius of it; None when the largest is smaller than a disc of
+    min_radius_px.
+
+    Where a sensor's lights lie along one axis the change is near zero along the line through
+    the apex across it (the slope along that axis is zero there), so the strong change can come
+    in two halves with a dark band between them, and the larger half alone gives a small circle
+    on one side (DIGIT press 0008: r 6.8 px of about 25). A change far from the imprint, or a
+    small one beside it, is not joined."""
+    import cv2
+
+    strict, _ = _change_threshold(m)
+    n, lab, stats, _ = cv2.connectedComponentsWithStats((m > strict).astype(np.uint8),
+                                                        connectivity=8)
+    if n <= 1:
+        return None
+    area = stats[:, cv2.CC_STAT_AREA]
+    best = 1 + int(np.argmax(area[1:]))
+    if area[best] < math.pi * min_radius_px**2:
+        return None
+    others = [i for i in range(1, n) if i != best and area[i] >= LOBE_MIN_FRAC * area[best]]
+    if not others:
+        return lab == best
+    gap = cv2.distanceTransform((lab != best).astype(np.uint8), cv2.DIST_L2, 5)
+    reach = LOBE_GAP * math.sqrt(area[best] / math.pi)
+    keep = [best] + [i for i in others if float(gap[lab == i].min()) <= reach]
+    return np.isin(lab, keep)
 
 
 #: Restarts around a found circle: 8 starts this fraction of its radius away, and the gain in
@@ -389,8 +418,8 @@ def _fit_rays(m: np.ndarray, cx: float, cy: float, r0: float, sigma: float,
 #: A circle is doubted when its radius is outside [SUPPORT_LOW, SUPPORT_HIGH] times the radius
 #: of the area whose colour change stands above the noise (measured: good circles at 0.50-0.63
 #: of it on DIGIT presses, which have a wide skirt, 0.72-1.22 on Taxim's GelSight, its labels up
-#: to 1.32; the wrong detection, DIGIT 0008's first, at 0.17), or when less than COVER_MIN of
-#: its disc shows a change (a centre off the imprint).
+#: to 1.32; a circle on one lobe of DIGIT 0008, its first detection before `imprint_lobes`,
+#: at 0.17), or when less than COVER_MIN of its disc shows a change (a centre off the imprint).
 SUPPORT_LOW, SUPPORT_HIGH = 0.4, 1.6
 COVER_MIN = 0.5
 
