@@ -303,15 +303,44 @@ def test_real_digit_drops_only_the_frames_without_contact(tmp_path) -> None:
     run = calibrate(rec, method="lut", circles="detect", mm_per_px=1 / 21.09,
                     estimate_background=True, options={"bins": 16, "cells": 2})
     assert run.dropped == ["0016", "0017"]
-    p8 = next(p for p in run.presses if p["id"] == "0008")
-    assert p8["status"] == "used" and p8["retried_after"]
+    # 0008's strong change comes in two halves split by a dark band through the apex: both
+    # are joined into one imprint, so its first detection passes its check
+    assert run.retried == []
     cmp = _against_labels(run, 3.0 * 21.09)
     assert len(cmp) == 14
-    assert all(abs(c[0]) < 0.10 for c in cmp.values()), cmp
-    # 0008's label lies 9 px left of the ring the frame shows; 0009's and 0011's 3.5-4 px
+    near = {k: c for k, c in cmp.items() if k not in ("0008", "0009", "0011")}
+    assert all(abs(c[0]) < 0.10 and c[2] < 3.0 for c in near.values()), cmp
+    # the other three: the labels lie 3.5-9 px from the detected centres (0008's radius
+    # +10.2 %, drawn around a centre 7 px from its label's)
     far = sorted(k for k, c in cmp.items() if c[2] > 3)
     assert far == ["0008", "0009", "0011"], cmp
-    assert max(c[2] for k, c in cmp.items() if k != "0008") < 4.5
+    assert max(cmp[k][2] for k in ("0009", "0011")) < 4.5 and cmp["0008"][2] < 9.5
+    assert all(abs(cmp[k][0]) < 0.11 for k in far), cmp
+
+
+@pytest.mark.real
+def test_real_digit_far_labels_are_off_the_imprint(tmp_path) -> None:
+    """Where a DIGIT label and the detection part by more than 3 px, the centre about which the
+    colour change is most point-symmetric (`centres.symmetric_centre`, a check that needs
+    neither) lies more than 3 px from the label and within 3 px of the detection; on 0008 the
+    two lobes' widths at half their height are centred 6-7 px right of the label too
+    (docs/depth.md)."""
+    from vtsbench.depth.calibration import load_presses
+    from vtsbench.depth.centres import symmetric_centre
+    from vtsbench.depth.sphere import change_map, default_sigma
+
+    rec = digit_recordings(tmp_path / "digit")
+    presses, bg, setup, _ = load_presses(rec, circles="detect", mm_per_px=1 / 21.09,
+                                         estimate_background=True)
+    rows = {p["id"]: p for p in setup["presses"]}
+    for press in presses:
+        lab, det = rows[press.id]["label"], rows[press.id]["detected"]
+        if lab is None or np.hypot(det["x"] - lab["x"], det["y"] - lab["y"]) <= 3:
+            continue
+        m = change_map(press.image, bg, default_sigma(bg.shape[:2]))
+        sx, sy = symmetric_centre(m, det["x"], det["y"], 1.5 * det["r"])
+        assert np.hypot(sx - lab["x"], sy - lab["y"]) > 3.0, press.id
+        assert np.hypot(sx - det["x"], sy - det["y"]) < 3.0, press.id
 
 
 # -- labels from beside the files -------------------------------------------------------------

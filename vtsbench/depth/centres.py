@@ -94,3 +94,38 @@ def consistent_centres(presses: list[Any], background: np.ndarray, setup: dict[s
                 moved[i] = replace(p, x=cx, y=cy)
         current = moved
     return [(p.x, p.y) for p in current]
+
+
+def symmetric_centre(m: np.ndarray, x: float, y: float, radius: float, span: float = 8.0
+                     ) -> tuple[float, float]:
+    """The point within `span` px of (x, y) about which the change map `m` (H x W) is most
+    point-symmetric over a disc of `radius` px: the centre that minimises the mean squared
+    difference between m(c + u) and m(c - u).
+
+    A check of a circle's centre that needs neither a label nor the edge detector: to first
+    order the colour change follows the slope, which is odd about the apex, so its size is
+    even about it, whatever the lights' directions and even where the change has no edge (a
+    dark band through the apex). Unevenly bright lobes and light that varies across the gel
+    make it a coarse check: on Taxim's presses it lies 0.5-2.9 px from the consistent centres
+    (docs/depth.md). A 1 px grid, then a 0.25 px one around the best point."""
+    import cv2
+
+    g = np.arange(-math.ceil(radius), math.ceil(radius) + 1, dtype=np.float32)
+    u, v = np.meshgrid(g, g)
+    disc = np.hypot(u, v) <= radius
+    u, v = u[disc][None, :], v[disc][None, :]
+
+    def asymmetry(cx: float, cy: float) -> float:
+        a = cv2.remap(m, np.float32(cx) + u, np.float32(cy) + v, cv2.INTER_LINEAR,
+                      borderMode=cv2.BORDER_REFLECT)
+        b = cv2.remap(m, np.float32(cx) - u, np.float32(cy) - v, cv2.INTER_LINEAR,
+                      borderMode=cv2.BORDER_REFLECT)
+        return float(np.mean((a - b) ** 2))
+
+    best = (x, y)
+    for step, reach in ((1.0, span), (0.25, 1.0)):
+        offs = np.arange(-reach, reach + 1e-9, step)
+        cx0, cy0 = best
+        best = min(((cx0 + dx, cy0 + dy) for dx in offs for dy in offs),
+                   key=lambda c: asymmetry(*c))
+    return float(best[0]), float(best[1])
