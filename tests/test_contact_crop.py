@@ -11,7 +11,7 @@ import torch
 
 from vtsbench.labels import angle_to_class
 from vtsbench.models.contact_crop import contact_crop, crop_box, crop_center
-from vtsbench.models.timesformer import dihedral_augment
+from vtsbench.models.timesformer import dihedral_augment, dihedral_average
 
 
 def moving_blob(dx: float, dy_rows: float, t: int = 4, h: int = 60, w: int = 80,
@@ -80,6 +80,32 @@ def test_dihedral_labels_follow_the_frames(dx: float, dy_rows: float) -> None:
     assert (none == -1).all()
     with pytest.raises(ValueError, match="square"):
         dihedral_augment(torch.zeros(1, 2, 3, 4, 5), torch.zeros(1), torch.Generator())
+
+
+@pytest.mark.parametrize(("dx", "dy_rows"), [(6, 0), (5, -5), (-4, 4)])
+def test_dihedral_average_maps_every_view_back(dx: float, dy_rows: float) -> None:
+    """Test-time averaging: a 'model' that reads each turned view's motion right gives one-hot
+    probabilities on the unturned sequence's bin after the mapping back; a model that answers
+    one fixed bin whatever it sees is spread over that bin's orbit (bin 0: the 4 even bins,
+    each reached by two of the 8 symmetries)."""
+    seq = moving_blob(dx, dy_rows, h=64, w=64, at=(32, 32))
+    x = torch.from_numpy(seq.transpose(0, 3, 1, 2).astype(np.float32) / 255)
+    label = _direction(x)
+
+    def reader(batch: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        d = torch.tensor([_direction(v) for v in batch])
+        return torch.zeros(len(batch), 3), torch.nn.functional.one_hot(d, 8).float() * 50
+
+    ps, pd = dihedral_average(reader, x)
+    assert int(pd.argmax()) == label and float(pd.max()) > 0.99
+    assert torch.allclose(ps, torch.full((3,), 1 / 3)) and torch.isclose(pd.sum(), torch.ones(()))
+
+    def fixed(batch: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return torch.zeros(len(batch), 3), torch.nn.functional.one_hot(
+            torch.zeros(len(batch), dtype=torch.long), 8).float() * 50
+
+    _, spread = dihedral_average(fixed, x)
+    assert torch.allclose(spread, torch.tensor([0.25, 0.0] * 4), atol=1e-3)
 
 
 def test_crop_flow_follows_the_motion() -> None:

@@ -236,3 +236,21 @@ def test_resnet18_arch_and_unknown_arch() -> None:
     assert sum(p.numel() for p in m.parameters()) < 12_000_000
     with pytest.raises(VtsError, match="arch"):
         static_resnet(5, "rgb", arch="vgg")
+
+
+def test_augment_border_fill_keeps_the_gel_colour_in_turned_corners():
+    # a grey-green gel with a dark imprint in the middle: a turn by about 45 degrees uncovers
+    # the corners, which `border` fills with the gel's colour and `zero` with black
+    img = torch.empty(1, 3, 32, 32)
+    img[:, 0], img[:, 1], img[:, 2] = 0.4, 0.6, 0.5
+    img[:, :, 12:20, 12:20] = 0.1
+    batch = img.repeat(8, 1, 1, 1)
+    kw = dict(jitter=0.0, max_rotation=50.0, crop_scale=(1.0, 1.0))
+    border = augment(batch, "rgb", torch.Generator().manual_seed(3), fill="border", **kw)
+    zero = augment(batch, "rgb", torch.Generator().manual_seed(3), **kw)
+    gel = img[0, :, 0, 0].view(1, 3)
+    assert zero[:, :, 0, 0].min() < 0.05  # black corners somewhere in the batch
+    # (bilinear resampling darkens the seam between the frame and the fill a little)
+    assert torch.allclose(border[:, :, 0, 0], gel.expand(8, 3), atol=0.05)
+    with pytest.raises(ValueError, match="fill"):
+        augment(batch, "rgb", torch.Generator(), fill="mean")

@@ -52,3 +52,17 @@ def test_resnet_depth_predicts_every_sample(vts_dataset: Path, tmp_path: Path) -
     ds = vtsbench.load(vts_dataset)
     assert [r["sample_id"] for r in rows] == list(ds.split(SPLIT, "train").ids)
     assert all(0 <= r["pred"] < len(ds.info.objects) for r in rows)
+
+
+def test_dihedral_views_are_the_eight_exact_symmetries() -> None:
+    import torch
+
+    from vtsbench.recipes_builtin.resnet import dihedral_views
+
+    x = torch.arange(2 * 5 * 5, dtype=torch.float32).view(1, 2, 5, 5)  # no symmetry of its own
+    v = dihedral_views(x)
+    assert v.shape == (8, 2, 5, 5)
+    assert len({tuple(t.flatten().tolist()) for t in v}) == 8  # all different
+    for t in v:  # each a rearrangement of the same pixels, channels kept together
+        assert torch.equal(t.flatten(1).sort(1).values, x[0].flatten(1).sort(1).values)
+    assert torch.equal(v[0], x[0]) and torch.equal(v[4], x[0].flip(-1))

@@ -86,6 +86,12 @@ def _uniform(generator: torch.Generator, lo: float, hi: float) -> float:
     return lo + (hi - lo) * float(torch.rand((), generator=generator))
 
 
+def _border_median(img: torch.Tensor) -> list[float]:
+    """Per channel, the median of the outermost row and column pixels of (C, H, W)."""
+    edge = torch.cat([img[:, 0], img[:, -1], img[:, 1:-1, 0], img[:, 1:-1, -1]], dim=1)
+    return [float(v) for v in edge.median(dim=1).values]
+
+
 def augment(
     batch: torch.Tensor,
     modality: str,
@@ -94,6 +100,7 @@ def augment(
     jitter: float = 0.3,
     max_rotation: float = 15.0,
     crop_scale: tuple[float, float] = (0.8, 1.0),
+    fill: str = "zero",
 ) -> torch.Tensor:
     """Training-time augmentation of a batch ``(B, C, H, W)``, deterministic given ``generator``.
 
@@ -102,8 +109,13 @@ def augment(
     ``rgbd``); then the same geometric transform on every channel: horizontal and vertical
     flips (p = 0.5 each), a rotation in [-max_rotation, max_rotation] degrees (zero fill) and a
     random resized crop back to (H, W). Depth values are only moved, never rescaled (bilinear
-    resampling aside). RGB is expected in [0, 1].
+    resampling aside). RGB is expected in [0, 1]. ``fill``: what the rotation brings into the
+    corners: ``zero``, or ``border``, each channel's median over the sample's outermost pixels
+    (on a contact crop the untouched gel, so a turned crop has no black corners that no test
+    frame has).
     """
+    if fill not in ("zero", "border"):
+        raise ValueError(f"fill must be 'zero' or 'border', not {fill!r}")
     from torchvision.transforms.v2 import functional as TF
 
     channels = channels_of(modality)
@@ -123,7 +135,8 @@ def augment(
         if float(torch.rand((), generator=generator)) < 0.5:
             img = TF.vertical_flip(img)
         angle = _uniform(generator, -max_rotation, max_rotation)
-        img = TF.rotate(img, angle, interpolation=TF.InterpolationMode.BILINEAR, fill=0.0)
+        img = TF.rotate(img, angle, interpolation=TF.InterpolationMode.BILINEAR,
+                        fill=_border_median(img) if fill == "border" else 0.0)
         area = _uniform(generator, *crop_scale) * h * w
         ratio = math.exp(_uniform(generator, math.log(3 / 4), math.log(4 / 3)))
         ch = min(h, max(1, round(math.sqrt(area / ratio))))

@@ -38,6 +38,13 @@ def _normalize(x: Any, modality: str, depth_scale_mm: float) -> Any:
     return (x - mean) / std
 
 
+def dihedral_views(x: torch.Tensor) -> torch.Tensor:
+    """(1, C, S, S) -> (8, C, S, S): the image under the 8 symmetries of the square (four
+    quarter turns, each also mirrored). Exact on a square crop: no resampling, no fill."""
+    turns = [torch.rot90(x, k, dims=(-2, -1)) for k in range(4)]
+    return torch.cat(turns + [t.flip(-1) for t in turns])
+
+
 class _Normalized(torch.nn.Module):
     """The ResNet on raw (B, C, H, W) input: normalisation first (for Grad-CAM)."""
 
@@ -92,6 +99,9 @@ class ResnetRecipe(Recipe):
             "crop_px": 320,             # square of sensor px around the contact, resized to
                                         # image_size; None: the whole frame
             "crop_scale": [0.8, 1.0],
+            "rotation_fill": "border",  # corners a rotation uncovers: border (each channel's
+                                        # median over the crop's outermost pixels: the gel) |
+                                        # zero (checkpoints without the key)
             "steps": 300,
             "batch_size": 16,
             "lr": 1e-3,
@@ -103,6 +113,9 @@ class ResnetRecipe(Recipe):
             "checkpoint_every": 50,
             "amp": True,
             "gradcam": 0,               # write Grad-CAM overlays of the first N test samples
+            "tta": True,                # predict: softmax averaged over the 8 symmetries of the
+                                        # square (turns by 90 degrees, mirrors): exact on the
+                                        # square crop, and free for a static imprint's class
             "threads": 1,               # torch CPU threads, pinned: the same figures on any
                                         # machine (null: torch's default); one per process:
                                         # two OpenMP threads on a busy 2-core machine made a
@@ -143,7 +156,8 @@ class ResnetRecipe(Recipe):
         data = self._data(view, config)
         modality, scale = config["modality"], float(config["depth_scale_mm"])
         aug = dict(jitter=float(config["jitter"]), max_rotation=float(config["max_rotation"]),
-                   crop_scale=tuple(config["crop_scale"]))
+                   crop_scale=tuple(config["crop_scale"]),
+                   fill=config.get("rotation_fill") or "zero")
 
         def loss_fn(net: torch.nn.Module, batch: Any, dev: torch.device) -> torch.Tensor:
             x, target = batch
@@ -213,6 +227,7 @@ class ResnetRecipe(Recipe):
         view = vtsbench.load(dataset_path).split(split, part)
         data = self._data(view, config)
         modality, scale = config["modality"], float(config["depth_scale_mm"])
+        tta = bool(config.get("tta", False))  # False in checkpoints written before the option
         rows: list[dict[str, Any]] = []
         self.latency_s = []
         with torch.inference_mode():
@@ -220,8 +235,10 @@ class ResnetRecipe(Recipe):
                 x, target = data[i]
                 x = x.unsqueeze(0).to(dev)
                 t0 = time.perf_counter()
-                logits = model(_normalize(x, modality, scale))
-                pred = int(logits[0].argmax())
+                if tta:
+                    x = dihedral_views(x)
+                probs = model(_normalize(x, modality, scale)).softmax(-1).mean(0)
+                pred = int(probs.argmax())
                 self.latency_s.append(time.perf_counter() - t0)
                 rows.append({"sample_id": target["sample_id"], "task": "object", "pred": pred})
         return rows

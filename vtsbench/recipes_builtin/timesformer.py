@@ -164,6 +164,10 @@ class TimesformerRecipe(Recipe):
                                         # where tanh compression bends (checkpoints without
                                         # the key: 2.0)
             "delta_gain": 4.0,          # delta input: gain before clipping to [-1, 1]
+            "tta": True,                # predict: probabilities averaged over the 8 symmetries
+                                        # of the square crop, direction bins mapped back
+                                        # (contact crops only; checkpoints without the key:
+                                        # false)
             "crop_px": 320,             # square of this many sensor px around the contact,
                                         # resized to image_size; None: the whole frame
             "steps": 400,
@@ -294,21 +298,32 @@ class TimesformerRecipe(Recipe):
         load_checkpoint(checkpoint, model)
         dev = resolve_device(device)
         from vtsbench.environment import deterministic
+        from vtsbench.models.timesformer import dihedral_average
 
         deterministic(config.get("threads"))
         model.to(dev).eval()
         view = vtsbench.load(dataset_path).split(split, part)
         data = self._view_torch(view, model, config)
+        tta = bool(config.get("tta", False)) and bool(config.get("crop_px"))
+
+        def forward(x: Any) -> Any:
+            return model(_normalize(x, config))
+
         rows: list[dict[str, Any]] = []
         self.latency_s = []
         with torch.inference_mode():
             for i in progress_iter(range(len(data)), len(data), f"timesformer ({part})",
                                    progress):
                 x, target = data[i]
-                x = x.unsqueeze(0).to(dev)
                 t0 = time.perf_counter()
-                state_logits, dir_logits = model(_normalize(x, config))
-                ps, pd = state_logits[0].cpu(), dir_logits[0].cpu()
+                if tta:
+                    c = x.shape[1]
+                    ps, pd = dihedral_average(forward, x.to(dev), (c - 2, c - 1)
+                                              if uses_flow(config) else None)
+                else:
+                    state_logits, dir_logits = forward(x.unsqueeze(0).to(dev))
+                    ps, pd = state_logits[0], dir_logits[0]
+                ps, pd = ps.cpu(), pd.cpu()
                 # a latency from frames to labels: the crop and motion channels count too
                 prep = data.prep_s if isinstance(data, CropData) else 0.0
                 self.latency_s.append(time.perf_counter() - t0 + prep)
