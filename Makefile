@@ -39,7 +39,8 @@ demo: $(VENV)/.installed
 	@echo "demo done: recordings in $(DEMO)/recordings (contact sheet $(DEMO)/preview.png), calibration report in $(DEMO)/recordings/calibration.safetensors.report/, dataset in $(DEMO)/dataset, runs in $(DEMO)/runs, leaderboards in $(DEMO)/leaderboards, results table in $(DEMO)/results.md"
 
 ## results-demo: the published demo-profile figures: the demo's dataset -> docs/results.md and
-## leaderboards/; with OCTOPI=folder of the octopi GelSight Mini videos, also ResNet on that data
+## leaderboards/; with OCTOPI=folder of the octopi GelSight Mini videos, also ResNet on that data;
+## with OTHER=results.json (--summary of the same profile on a dataset of another seed), its table
 results-demo: $(VENV)/.installed
 	test -f $(DEMO)/dataset/meta/info.json || $(MAKE) demo
 	$(if $(OCTOPI),test -f $(DEMO)/octopi-dataset/meta/info.json || ( \
@@ -49,7 +50,8 @@ results-demo: $(VENV)/.installed
 			--workers $(WORKERS) --overwrite ))
 	$(BIN)/python benchmarks/results.py --dataset $(DEMO)/dataset --runs $(DEMO)/runs \
 		--leaderboards leaderboards --out docs/results.md --profile demo \
-		--summary $(DEMO)/results.json $(if $(OCTOPI),--octopi $(DEMO)/octopi-dataset)
+		--summary $(DEMO)/results.json $(if $(OCTOPI),--octopi $(DEMO)/octopi-dataset) \
+		$(if $(OTHER),--other $(OTHER))
 
 ## results: the paper-scale profile: ~8,000 sequences and ~19,000 static frames simulated, the
 ## paper's models (TimeSformer-base 224, ResNet-50 224) on a GPU when there is one, else on the

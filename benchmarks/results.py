@@ -73,6 +73,9 @@ DEMO_TSF = {"config": "small", "modality": "rgb", "image_size": 64, "crop_px": 2
 DEMO_RESNET = {"arch": "resnet18", "image_size": 128, "crop_px": 320, "steps": 300,
                "batch_size": 16, "checkpoint_every": 100, "gradcam": 4,
                "fit_parts": ["train", "val"]}
+#: Steps per modality in the demo: depth (one channel, no colour) needs twice RGB's to pass 85 %
+#: (docs/models.md, "Which knob buys how much").
+DEMO_RESNET_STEPS = {"rgb": 300, "depth": 600}
 #: The results profile (paper scale: ~8,000 sequences, ~19,000 static frames, paper-size
 #: models): steps on a GPU, and the fewer steps it falls back to on a CPU (the page says so).
 PAPER_TSF = {"config": "paper", "modality": "rgb", "crop_px": 256,
@@ -97,10 +100,9 @@ def profile_runs(profile: str, octopi: bool, *, gpu: bool = False,
         for split in ("unseen_objects", "seen"):
             runs.append(Run("flow-shift", "flow", split, {"scale": 0.25}))
             runs.append(Run("timesformer-small-rgb", "timesformer", split, dict(DEMO_TSF)))
-        runs.append(Run("resnet18-rgb", "resnet", "static_sessions",
-                        {**DEMO_RESNET, "modality": "rgb"}))
-        runs.append(Run("resnet18-depth", "resnet", "static_sessions",
-                        {**DEMO_RESNET, "modality": "depth"}))
+        for mod in ("rgb", "depth"):
+            runs.append(Run(f"resnet18-{mod}", "resnet", "static_sessions",
+                            {**DEMO_RESNET, "modality": mod, "steps": DEMO_RESNET_STEPS[mod]}))
     else:
         steps = PAPER_STEPS["gpu" if gpu else "cpu"]
         tsf = {**PAPER_TSF, "steps": steps["timesformer"], "pretrained_path": pretrained,
@@ -118,6 +120,14 @@ def profile_runs(profile: str, octopi: bool, *, gpu: bool = False,
                         {**DEMO_RESNET, "modality": "rgb", "crop_px": None, "image_size": 112,
                          "steps": 800, "gradcam": 8}, dataset="octopi"))
     return runs
+
+
+def expected_cost(run: Run) -> float:
+    """Rough training seconds of a run, to start the long ones first: steps times the seconds
+    of one demo-size step (measured side by side on 2 cores: ResNet-18 at 128 px, batch 16,
+    0.7 s; small TimeSformer at 64 px, batch 8, 0.5 s); the flow recipe fits a tree in seconds."""
+    per_step = {"resnet": 0.7, "timesformer": 0.5}.get(run.recipe, 0.0)
+    return per_step * run.config.get("steps", 0)
 
 
 def run_cli(*args: str, log: list[str]) -> float:
@@ -572,10 +582,14 @@ def main() -> None:
     # independent runs side by side, one torch thread each (the recipes pin it): on 2 cores
     # two single-threaded runs beat one two-threaded run, whose OpenMP threads stall when the
     # machine is busy; each run's figures do not depend on what runs beside it
+    # longest first, so that the last run to start is a short one and neither worker idles
+    # while the other trains a long run alone
+    order = sorted(range(len(runs)), key=lambda k: -expected_cost(runs[k]))
     with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        done = list(pool.map(lambda k: run_one(runs[k], paths[runs[k].dataset], args.runs,
-                                               args.leaderboards, args.retrain, logs[k]),
-                             range(len(runs))))
+        started = list(pool.map(lambda k: run_one(runs[k], paths[runs[k].dataset], args.runs,
+                                                  args.leaderboards, args.retrain, logs[k]),
+                                order))
+    done = [started[order.index(k)] for k in range(len(runs))]
     for run, r, run_log in zip(runs, done, logs, strict=True):
         log += run_log
         ds = paths[run.dataset]

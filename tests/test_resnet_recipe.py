@@ -45,7 +45,8 @@ def test_resnet_depth_predicts_every_sample(vts_dataset: Path, tmp_path: Path) -
     import vtsbench
 
     rec = load_recipe(RECIPE)
-    config = {**rec.default_config(), **TINY, "modality": "depth", "steps": 1, "gradcam": 0}
+    config = {**rec.default_config(), **TINY, "modality": "depth", "steps": 1, "gradcam": 0,
+              "tta": True}
     ckpt = rec.train(vts_dataset, SPLIT, tmp_path, config, progress=False)
     assert not (tmp_path / "gradcam").exists()
     rows = rec.predict(ckpt, vts_dataset, SPLIT, "train")

@@ -113,9 +113,10 @@ class ResnetRecipe(Recipe):
             "checkpoint_every": 50,
             "amp": True,
             "gradcam": 0,               # write Grad-CAM overlays of the first N test samples
-            "tta": True,                # predict: softmax averaged over the 8 symmetries of the
-                                        # square (turns by 90 degrees, mirrors): exact on the
-                                        # square crop, and free for a static imprint's class
+            "tta": False,               # predict: softmax averaged over the 8 symmetries of the
+                                        # square (turns by 90 degrees, mirrors; exact on the
+                                        # square crop): within one test frame of off on the
+                                        # demo's two seeds for 5x the latency (docs/models.md)
             "threads": 1,               # torch CPU threads, pinned: the same figures on any
                                         # machine (null: torch's default); one per process:
                                         # two OpenMP threads on a busy 2-core machine made a
