@@ -67,3 +67,23 @@ def test_dihedral_views_are_the_eight_exact_symmetries() -> None:
     for t in v:  # each a rearrangement of the same pixels, channels kept together
         assert torch.equal(t.flatten(1).sort(1).values, x[0].flatten(1).sort(1).values)
     assert torch.equal(v[0], x[0]) and torch.equal(v[4], x[0].flip(-1))
+
+
+def test_depth_detail_lifts_fine_relief_and_leaves_a_smooth_dome() -> None:
+    import torch
+
+    from vtsbench.recipes_builtin.resnet import _normalize
+
+    yy, xx = torch.meshgrid(torch.arange(64.0), torch.arange(64.0), indexing="ij")
+    dome = (0.5 * torch.exp(-((xx - 32) ** 2 + (yy - 32) ** 2) / (2 * 12.0**2))).view(1, 1, 64, 64)
+    weave = 0.01 * torch.sign(torch.sin(xx * torch.pi / 2)).view(1, 1, 64, 64)  # period 4 px
+    cfg = {"modality": "depth", "depth_scale_mm": 0.5}
+    assert torch.equal(_normalize(dome + weave, cfg), (dome + weave) / 0.5)  # off: a plain scale
+    on = {**cfg, "depth_detail_gain": 10.0, "depth_detail_px": 2.0}
+    smooth = _normalize(dome, on) - dome / 0.5
+    # the dome (peak 1.0 in units of depth_scale_mm) bends by its curvature only: 0.27 at most
+    assert smooth[..., 8:-8, 8:-8].abs().max() < 0.3
+    lifted = _normalize(dome + weave, on) - _normalize(dome, on)
+    # the weave's 0.02 amplitude (in units of depth_scale_mm) comes out about 10x larger
+    assert 0.15 < float(lifted[..., 8:-8, 8:-8].std()) < 0.3
+    assert float((weave / 0.5)[..., 8:-8, 8:-8].std()) < 0.025

@@ -4,14 +4,15 @@ Trains `vtsbench.models.resnet.static_resnet` on the `train` part of a static sp
 jitter and geometric augmentation (`vtsbench.models.resnet.augment`, its random draws seeded
 from the checkpointed torch RNG, so a resumed run sees the same augmentations), through
 `vtsbench.training.train_loop`. Inputs: rgb (ImageNet-normalised after augmentation) or depth
-(mm divided by `depth_scale_mm`). `predict` writes one `object` row per sample. With
-`gradcam: N`, training ends by writing Grad-CAM overlays of the first N samples of the split's
-test part to OUT/gradcam/SAMPLE_ID.png.
+(mm divided by `depth_scale_mm`, its fine relief lifted by `depth_detail_gain`). `predict`
+writes one `object` row per sample. With `gradcam: N`, training ends by writing Grad-CAM
+overlays of the first N samples of the split's test part to OUT/gradcam/SAMPLE_ID.png.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
 from pathlib import Path
@@ -29,10 +30,21 @@ IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 
 
-def _normalize(x: Any, modality: str, depth_scale_mm: float) -> Any:
-    """(B, C, H, W): rgb in [0, 1] -> ImageNet-normalised; depth (mm) / depth_scale_mm."""
-    if modality == "depth":
-        return x / depth_scale_mm
+def _normalize(x: Any, config: dict[str, Any]) -> Any:
+    """(B, C, H, W): rgb in [0, 1] -> ImageNet-normalised; depth (mm) / depth_scale_mm, plus
+    `depth_detail_gain` times its detail (the depth minus its Gaussian blur of
+    `depth_detail_px` at the model's input): a texture's relief of hundredths of a mm rides on a
+    dome of tenths, and is what tells fabric from wood."""
+    if config["modality"] == "depth":
+        y = x / float(config["depth_scale_mm"])
+        gain = float(config.get("depth_detail_gain") or 0.0)  # 0 in older checkpoints
+        if gain:
+            from torchvision.transforms.v2 import functional as TF
+
+            sigma = float(config.get("depth_detail_px") or 2.0)
+            k = 2 * math.ceil(3 * sigma) + 1
+            y = y + gain * (y - TF.gaussian_blur(y, [k, k], [sigma, sigma]))
+        return y
     mean = x.new_tensor(IMAGENET_MEAN).view(1, 3, 1, 1)
     std = x.new_tensor(IMAGENET_STD).view(1, 3, 1, 1)
     return (x - mean) / std
@@ -48,13 +60,12 @@ def dihedral_views(x: torch.Tensor) -> torch.Tensor:
 class _Normalized(torch.nn.Module):
     """The ResNet on raw (B, C, H, W) input: normalisation first (for Grad-CAM)."""
 
-    def __init__(self, model: torch.nn.Module, modality: str, depth_scale_mm: float) -> None:
+    def __init__(self, model: torch.nn.Module, config: dict[str, Any]) -> None:
         super().__init__()
-        self.net, self.layer4 = model, model.layer4
-        self.modality, self.depth_scale_mm = modality, depth_scale_mm
+        self.net, self.layer4, self.config = model, model.layer4, config
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.net(_normalize(x, self.modality, self.depth_scale_mm))
+        return self.net(_normalize(x, self.config))
 
 
 class StaticCrops(CachedItems):
@@ -110,6 +121,10 @@ class ResnetRecipe(Recipe):
             "schedule": "cosine",
             "grad_clip": None,
             "depth_scale_mm": 1.0,
+            "depth_detail_gain": 10.0,  # depth input + gain x (depth - its Gaussian blur): lifts
+            "depth_detail_px": 2.0,     # fine relief off the dome of the press (83 -> 97 %,
+                                        # docs/models.md); blur sigma in px at the model's input;
+                                        # 0: plain depth (checkpoints without the key)
             "checkpoint_every": 50,
             "amp": True,
             "gradcam": 0,               # write Grad-CAM overlays of the first N test samples
@@ -155,7 +170,7 @@ class ResnetRecipe(Recipe):
         objects = list(ds.info.objects)
         model = self._model(config, len(objects), config["pretrained_path"])
         data = self._data(view, config)
-        modality, scale = config["modality"], float(config["depth_scale_mm"])
+        modality = config["modality"]
         aug = dict(jitter=float(config["jitter"]), max_rotation=float(config["max_rotation"]),
                    crop_scale=tuple(config["crop_scale"]),
                    fill=config.get("rotation_fill") or "zero")
@@ -166,7 +181,7 @@ class ResnetRecipe(Recipe):
                 # drawn from the global torch RNG, which the checkpoints hold: exact resume
                 g = torch.Generator().manual_seed(int(torch.randint(0, 2**62, (1,))))
                 x = augment(x, modality, g, **aug)
-            logits = net(_normalize(x.to(dev), modality, scale))
+            logits = net(_normalize(x.to(dev), config))
             return torch.nn.functional.cross_entropy(logits, target["class_idx"].long().to(dev))
 
         cfg = TrainConfig.from_recipe(
@@ -214,7 +229,7 @@ class ResnetRecipe(Recipe):
         if not items:
             return []
         x = torch.stack([it[0] for it in items]).to(dev)
-        wrapped = _Normalized(model, config["modality"], float(config["depth_scale_mm"]))
+        wrapped = _Normalized(model, config)
         cams = grad_cam(wrapped, x)
         paths = [Path(out) / f"{it[1]['sample_id']}.png" for it in items]
         return write_gradcam_overlays(x.detach().cpu(), cams.detach().cpu(), paths)
@@ -227,7 +242,6 @@ class ResnetRecipe(Recipe):
         model, config, dev = self._load(checkpoint, device)
         view = vtsbench.load(dataset_path).split(split, part)
         data = self._data(view, config)
-        modality, scale = config["modality"], float(config["depth_scale_mm"])
         tta = bool(config.get("tta", False))  # False in checkpoints written before the option
         rows: list[dict[str, Any]] = []
         self.latency_s = []
@@ -238,7 +252,7 @@ class ResnetRecipe(Recipe):
                 t0 = time.perf_counter()
                 if tta:
                     x = dihedral_views(x)
-                probs = model(_normalize(x, modality, scale)).softmax(-1).mean(0)
+                probs = model(_normalize(x, config)).softmax(-1).mean(0)
                 pred = int(probs.argmax())
                 self.latency_s.append(time.perf_counter() - t0)
                 rows.append({"sample_id": target["sample_id"], "task": "object", "pred": pred})
