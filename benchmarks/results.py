@@ -90,7 +90,7 @@ PAPER_STEPS = {"gpu": {"timesformer": 6000, "resnet": 6000},
 
 def profile_runs(profile: str, octopi: bool, *, gpu: bool = False,
                  pretrained: str | None = None) -> list[Run]:
-    """The runs of a profile: `demo` (CPU-sized models on the demo's dataset, about 9 minutes
+    """The runs of a profile: `demo` (CPU-sized models on the demo's dataset, about 8 minutes
     on 2 CPU cores) or `results` (the paper's models, TimeSformer-base at 224 and ResNet-50,
     meant for a paper-scale dataset on a GPU; on a CPU with PAPER_STEPS["cpu"] steps).
     `pretrained`: folder of the SSv2 TimeSformer weights (results profile; without it the
@@ -160,7 +160,8 @@ def run_one(run: Run, ds: Path, runs_dir: Path, boards: Path, retrain: bool,
                   "--out", str(out), "--quiet"]
     if run.config:
         train_args += ["--config", str(cfg)]
-    if not (out / "checkpoint.safetensors").exists():  # a finished run is not trained again
+    trained = not (out / "checkpoint.safetensors").exists()  # a finished run is not trained again
+    if trained:
         train_s = run_cli(*train_args, log=log)
         (out / "train_seconds.txt").write_text(f"{train_s:.1f}\n")
     sub = runs_dir / f"{name}.csv"
@@ -192,7 +193,7 @@ def run_one(run: Run, ds: Path, runs_dir: Path, boards: Path, retrain: bool,
         else 100.0 * d0["adjacent_error_share"],
         "by_magnitude": d0.get("by_magnitude"), "per_state": s0.get("per_state"),
         "environment": meta.get("environment"),
-        "run": run, "name": name, "n": metrics["n_samples"],
+        "run": run, "name": name, "n": metrics["n_samples"], "trained": trained,
         "train_s": float(seconds.read_text()) if seconds.exists() else None,
         "latency_ms": meta.get("latency_ms_per_sample_median"),
         "state": acc("state"), "direction": acc("direction", "state_given_accuracy"),
@@ -327,6 +328,9 @@ def render(rows: list[dict[str, Any]], paper_rows: list[dict[str, Any]], info: d
     """The results page (markdown)."""
     slip = [r for r in rows if r["run"].recipe in ("flow", "timesformer")]
     static = [r for r in rows if r["run"].recipe == "resnet"]
+    kept = sum(not r.get("trained", True) for r in rows)
+    reused = (f" ({kept} of {len(rows)} runs trained earlier and reused: their training time "
+              "is the train s column)") if kept else ""
     lines = [
         "# Results: speed against accuracy",
         "",
@@ -339,7 +343,7 @@ def render(rows: list[dict[str, Any]], paper_rows: list[dict[str, Any]], info: d
         "```",
         "",
         f"Machine: {info['machine']}. Devices: {info['devices']}. "
-        f"Whole run {elapsed / 60:.1f} min. {info.get('steps_note', '')}",
+        f"Whole run {elapsed / 60:.1f} min{reused}. {info.get('steps_note', '')}",
         "",
         f"Synthetic benchmark: `{info['dataset_name']}` built from `vtsbench simulate` "
         f"({info['dataset_desc']}), dataset_sha256 `{info['dataset_sha'][:16]}...`. "
