@@ -565,6 +565,9 @@ def main() -> None:
     ap.add_argument("--other", type=Path, default=None,
                     help="summary JSON (--summary) of the same profile on another dataset, "
                          "e.g. simulated with another seed: shown in its own table")
+    ap.add_argument("--steps", type=int, default=None,
+                    help="train every model run for this many steps instead of the profile's "
+                         "(a smoke run of the whole path; the page says so)")
     ap.add_argument("--summary", type=Path, default=None,
                     help="also write the rows as JSON here (accuracies, devices, versions)")
     args = ap.parse_args()
@@ -582,6 +585,9 @@ def main() -> None:
     device = "cuda" if gpu else "cpu"
     runs = profile_runs(args.profile, args.octopi is not None, gpu=gpu,
                         pretrained=args.pretrained)
+    if args.steps is not None:  # a smoke run: every trained run with this many steps
+        runs = [Run(r.method, r.recipe, r.split, {**r.config, "steps": args.steps}
+                    if "steps" in r.config else r.config, r.dataset) for r in runs]
     logs: list[list[str]] = [[] for _ in runs]
     # independent runs side by side, one torch thread each (the recipes pin it): on 2 cores
     # two single-threaded runs beat one two-threaded run, whose OpenMP threads stall when the
@@ -629,7 +635,9 @@ def main() -> None:
                ["no GPU on this machine"])),
         "dataset_name": rows[0]["dataset_name"], "dataset_sha": rows[0]["dataset_sha"],
         "dataset_desc": counts, "findings": findings(rows, paper_rows, refs),
-        "references": refs, "steps_note": steps_note(args.profile, gpu, args.pretrained),
+        "references": refs, "steps_note": steps_note(args.profile, gpu, args.pretrained)
+        + ("" if args.steps is None else f" Smoke run: every model trained for only "
+           f"{args.steps} steps (--steps), so its figures say nothing of the recipe."),
         "other": None if args.other is None else json.loads(args.other.read_text()),
     }
     elapsed = time.perf_counter() - t0

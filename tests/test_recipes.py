@@ -114,6 +114,20 @@ def test_config_override(toy_file: Path, tmp_path: Path) -> None:
         load_config(rec, tmp_path / "missing.json")
 
 
+@pytest.mark.parametrize("name", ["resnet", "timesformer"])
+def test_config_null_only_where_the_recipe_allows_it(name: str, tmp_path: Path) -> None:
+    # the results profile's configs give threads null (torch's default) and the real-video run
+    # crop_px null (the whole frame); a null step count is still an error
+    rec = load_recipe(name)
+    js = tmp_path / "c.json"
+    js.write_text(json.dumps({"threads": None, "crop_px": None}))
+    cfg = load_config(rec, js)
+    assert cfg["threads"] is None and cfg["crop_px"] is None
+    js.write_text(json.dumps({"steps": None}))
+    with pytest.raises(VtsError, match="'steps': expected a int"):
+        load_config(rec, js)
+
+
 def test_cli_train_predict_eval_with_a_file_recipe(vts_dataset: Path, toy_file: Path,
                                                    tmp_path: Path) -> None:
     from typer.testing import CliRunner

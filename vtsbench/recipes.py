@@ -39,6 +39,8 @@ class Recipe:
       return its path. With `resume`, continue from the last checkpoint found in out_dir.
     - `predict(checkpoint, dataset_path, split, part, *, device)`: a list of submission rows
       (dicts with `sample_id`, `task`, `pred` and optional `score_k`) for every sample of part.
+    - optional `nullable`: config keys that take null besides their default's type (e.g.
+      `threads`: null for torch's default).
     - optional, read by `vtsbench predict` into the submission's metadata: `latency_s` (seconds
       per sample of the last predict) and `input_scale_xy` (model-input pixels per sensor pixel,
       x and y, of the last predict; the per-distance scores give pixels at the model's input).
@@ -46,6 +48,7 @@ class Recipe:
 
     name: str = "recipe"
     tasks: tuple[str, ...] = ()
+    nullable: frozenset[str] = frozenset()
 
     def __init__(self) -> None:
         self.latency_s: list[float] = []
@@ -201,9 +204,11 @@ def load_config(recipe: Any, path: str | Path | None) -> dict[str, Any]:
     unknown = sorted(set(given) - set(config))
     if unknown:
         raise VtsError(f"unknown config keys {unknown} (known: {sorted(config)})", path)
+    nullable = getattr(recipe, "nullable", frozenset())
     for key, value in given.items():
         want = config[key]
         ok = (isinstance(value, type(want)) or want is None
+              or (value is None and key in nullable)
               or (isinstance(want, float) and isinstance(value, int)))
         if not ok or (isinstance(value, bool) and not isinstance(want, bool)) or (
                 isinstance(value, float) and not math.isfinite(value)):

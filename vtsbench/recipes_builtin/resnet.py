@@ -95,6 +95,7 @@ class StaticCrops(CachedItems):
 class ResnetRecipe(Recipe):
     name = "resnet"
     tasks = ("object",)
+    nullable = frozenset({"crop_px", "threads"})  # null: the whole frame; torch's default
 
     def default_config(self) -> dict[str, Any]:
         return {

@@ -138,6 +138,7 @@ class CropData(CachedItems):
 class TimesformerRecipe(Recipe):
     name = "timesformer"
     tasks = ("state", "direction")
+    nullable = frozenset({"crop_px", "threads"})  # null: the whole frame; torch's default
 
     def default_config(self) -> dict[str, Any]:
         return {
