@@ -126,6 +126,14 @@ def test_config_null_only_where_the_recipe_allows_it(name: str, tmp_path: Path) 
     js.write_text(json.dumps({"steps": None}))
     with pytest.raises(VtsError, match="'steps': expected a int"):
         load_config(rec, js)
+    js.write_text(json.dumps({"steps": True}))  # a bool is not a count
+    with pytest.raises(VtsError, match="'steps'"):
+        load_config(rec, js)
+    js.write_text(json.dumps({"pretrained_path": "w"}))  # a null default takes any value
+    assert load_config(rec, js)["pretrained_path"] == "w"
+    if name == "timesformer":  # pretrained: null (the config decides), true or false
+        js.write_text(json.dumps({"pretrained": False}))
+        assert load_config(rec, js)["pretrained"] is False
 
 
 def test_cli_train_predict_eval_with_a_file_recipe(vts_dataset: Path, toy_file: Path,

@@ -210,7 +210,8 @@ def load_config(recipe: Any, path: str | Path | None) -> dict[str, Any]:
         ok = (isinstance(value, type(want)) or want is None
               or (value is None and key in nullable)
               or (isinstance(want, float) and isinstance(value, int)))
-        if not ok or (isinstance(value, bool) and not isinstance(want, bool)) or (
+        if not ok or (isinstance(value, bool) and want is not None
+                      and not isinstance(want, bool)) or (
                 isinstance(value, float) and not math.isfinite(value)):
             raise VtsError(f"config key {key!r}: expected a {type(want).__name__} like "
                            f"{want!r}, got {value!r}", path)
