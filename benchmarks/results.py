@@ -86,6 +86,9 @@ PAPER_RESNET = {"arch": "resnet50", "image_size": 224, "crop_px": 320, "batch_si
                 "checkpoint_every": 500, "gradcam": 8, "threads": None}
 PAPER_STEPS = {"gpu": {"timesformer": 6000, "resnet": 6000},
                "cpu": {"timesformer": 300, "resnet": 600}}
+#: TimeSformer-base batch: 16 on a GPU; on a CPU 4, since one training run at 16 (8 frames at
+#: 224) passed 23.7 GB and was killed for memory on a 24 GiB machine.
+PAPER_TSF_BATCH = {"gpu": 16, "cpu": 4}
 
 
 def profile_runs(profile: str, octopi: bool, *, gpu: bool = False,
@@ -106,6 +109,7 @@ def profile_runs(profile: str, octopi: bool, *, gpu: bool = False,
     else:
         steps = PAPER_STEPS["gpu" if gpu else "cpu"]
         tsf = {**PAPER_TSF, "steps": steps["timesformer"], "pretrained_path": pretrained,
+               "batch_size": PAPER_TSF_BATCH["gpu" if gpu else "cpu"],
                "pretrained": pretrained is not None}
         for split in ("unseen_objects", "seen"):
             runs.append(Run("flow-shift", "flow", split, {"scale": 0.25}))
@@ -542,7 +546,8 @@ def steps_note(profile: str, gpu: bool, pretrained: str | None) -> str:
                 "page.")
     where = "on a GPU" if gpu else (
         f"on the CPU, with fewer steps than on a GPU ({PAPER_STEPS['cpu']} against "
-        f"{PAPER_STEPS['gpu']}): the paper-size models are under-trained here")
+        f"{PAPER_STEPS['gpu']}) and a TimeSformer batch of {PAPER_TSF_BATCH['cpu']} against "
+        f"{PAPER_TSF_BATCH['gpu']} (memory): the paper-size models are under-trained here")
     init = "from the SSv2 weights" if pretrained else "from random weights (no SSv2 weights given)"
     return f"Results profile: paper-size models trained {where}; TimeSformer-base {init}."
 
@@ -558,8 +563,10 @@ def main() -> None:
     ap.add_argument("--profile", choices=("demo", "results"), default="demo")
     ap.add_argument("--retrain", action="store_true", help="train every run afresh")
     ap.add_argument("--repeats", type=int, default=5, help="forward passes timed per paper model")
-    ap.add_argument("--jobs", type=int, default=2 if no_gpu() else 1,
-                    help="runs trained side by side (default: 2 on a CPU-only machine)")
+    ap.add_argument("--jobs", type=int, default=None,
+                    help="runs trained side by side (default: 2 for the demo profile on a "
+                         "CPU-only machine, else 1: two paper-size TimeSformers training side by "
+                         "side on the CPU were killed for memory on a 24 GiB machine)")
     ap.add_argument("--pretrained", default=None,
                     help="results profile: folder of the SSv2 TimeSformer weights")
     ap.add_argument("--other", type=Path, default=None,
@@ -595,7 +602,8 @@ def main() -> None:
     # longest first, so that the last run to start is a short one and neither worker idles
     # while the other trains a long run alone
     order = sorted(range(len(runs)), key=lambda k: -expected_cost(runs[k]))
-    with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+    jobs = args.jobs or (2 if args.profile == "demo" and no_gpu() else 1)
+    with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
         started = list(pool.map(lambda k: run_one(runs[k], paths[runs[k].dataset], args.runs,
                                                   args.leaderboards, args.retrain, logs[k]),
                                 order))
