@@ -51,10 +51,12 @@ def _normalize(x: Any, config: dict[str, Any]) -> Any:
 
 
 def dihedral_views(x: torch.Tensor) -> torch.Tensor:
-    """(1, C, S, S) -> (8, C, S, S): the image under the 8 symmetries of the square (four
-    quarter turns, each also mirrored). Exact on a square crop: no resampling, no fill."""
-    turns = [torch.rot90(x, k, dims=(-2, -1)) for k in range(4)]
-    return torch.cat(turns + [t.flip(-1) for t in turns])
+    """(1, C, S, S) -> (8, C, S, S): the image under the 8 symmetries of the square
+    (`vtsbench.models.timesformer.dihedral`: four quarter turns, then the same mirrored).
+    Exact on a square crop: no resampling, no fill."""
+    from vtsbench.models.timesformer import SYMMETRIES, dihedral
+
+    return torch.stack([dihedral(x[0], mirror, turns) for mirror, turns in SYMMETRIES])
 
 
 class _Normalized(torch.nn.Module):

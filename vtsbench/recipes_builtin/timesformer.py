@@ -62,6 +62,12 @@ def uses_flow(config: dict[str, Any]) -> bool:
     return input_mode(config).endswith("+flow")
 
 
+def vector_channels(config: dict[str, Any], channels: int) -> tuple[int, int] | None:
+    """The input channels that hold a motion vector (x, y): the last two of a `+flow` input,
+    which a turn or mirror of the frames must turn too; None without motion channels."""
+    return (channels - 2, channels - 1) if uses_flow(config) else None
+
+
 def flow_kind(config: dict[str, Any]) -> str | None:
     """The motion channels of a `+flow` input: `shift` (phase-correlation displacement of the
     moving gel) or `dis` (dense optical flow; checkpoints without the key); None without."""
@@ -265,9 +271,8 @@ class TimesformerRecipe(Recipe):
                 # square contact crops allow quarter turns too; resized whole frames mirrors
                 # only (see flip_augment)
                 if config.get("crop_px"):  # flow channels (the last two) turn with the frames
-                    c = x.shape[2]
-                    x, direction = dihedral_augment(x, direction, g, (c - 2, c - 1)
-                                                    if uses_flow(config) else None)
+                    x, direction = dihedral_augment(x, direction, g,
+                                                    vector_channels(config, x.shape[2]))
                 else:
                     x, direction = flip_augment(x, direction, g)
             x = _normalize(x.to(dev), config)
@@ -318,9 +323,8 @@ class TimesformerRecipe(Recipe):
                 x, target = data[i]
                 t0 = time.perf_counter()
                 if tta:
-                    c = x.shape[1]
-                    ps, pd = dihedral_average(forward, x.to(dev), (c - 2, c - 1)
-                                              if uses_flow(config) else None)
+                    ps, pd = dihedral_average(forward, x.to(dev),
+                                              vector_channels(config, x.shape[1]))
                 else:
                     state_logits, dir_logits = forward(x.unsqueeze(0).to(dev))
                     ps, pd = state_logits[0], dir_logits[0]
