@@ -107,7 +107,7 @@ def augment(
     Per sample: colour jitter (brightness, contrast, saturation by factors in
     [1 - jitter, 1 + jitter]) on the RGB channels only (``rgb``, and the first three of
     ``rgbd``); then the same geometric transform on every channel: horizontal and vertical
-    flips (p = 0.5 each), a rotation in [-max_rotation, max_rotation] degrees (zero fill) and a
+    flips (p = 0.5 each), a rotation in [-max_rotation, max_rotation] degrees (``fill``) and a
     random resized crop back to (H, W). Depth values are only moved, never rescaled (bilinear
     resampling aside). RGB is expected in [0, 1]. ``fill``: what the rotation brings into the
     corners: ``zero``, or ``border``, each channel's median over the sample's outermost pixels
