@@ -473,3 +473,15 @@ def test_help_never_cuts_an_option(width, monkeypatch) -> None:
         flat = "".join(rows) + "".join(res.output.split())
         assert "--holdout-objects" in flat or cmd != "build"
         assert "--range" in flat or cmd != "depth"
+
+
+def test_command_list_joins_a_docstring_broken_mid_sentence(monkeypatch) -> None:
+    """`vtsbench --help` lists each command's first paragraph wrapped to the terminal, not at the
+    line breaks of its docstring (build's breaks after 'folder', info's after 'disk;')."""
+    monkeypatch.setenv("COLUMNS", "200")
+    res = CliRunner().invoke(app, ["--help"], terminal_width=200)
+    assert res.exit_code == 0, res.output
+    lines = {ln.strip("│ ").split()[0]: ln for ln in res.output.splitlines()
+             if ln.strip("│ ") and not ln.strip("│ ").startswith(("╭", "╰", "-"))}
+    assert "(RGB only with --no-depth)" in lines["build"]
+    assert "versions and checksum" in lines["info"]

@@ -52,6 +52,14 @@ def install() -> None:
             out.append_text(item)
         return out
 
+    make_command_help = rich_utils._make_command_help
+
+    def command_help(*, help_text: str, markup_mode: Any) -> Any:
+        """A command's line in its group's list: its first paragraph joined, as above."""
+        return make_command_help(help_text=fix_linebreaks(help_text.split("\n\n"), markup_mode),
+                                 markup_mode=markup_mode)
+
+    rich_utils._make_command_help = command_help  # type: ignore[assignment]
     rich_utils.Columns = columns  # type: ignore[assignment]
     rich_utils.Table = FoldTable  # type: ignore[misc]
     rich_utils._fix_linebreaks = fix_linebreaks  # type: ignore[assignment]
