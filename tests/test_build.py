@@ -86,6 +86,13 @@ def test_info_command(built: Path) -> None:
     for text in ("samples per object", "slip directions", "unseen_objects", "on disk",
                  "dataset_sha256", "1.0.0"):
         assert text in res.output
+    # at 80 columns (a pipe's default) no header, object or direction name is cut or cropped
+    res = CliRunner().invoke(app, ["info", str(built)], env={"COLUMNS": "80"}, terminal_width=80)
+    assert res.exit_code == 0 and "…" not in res.output, res.output
+    assert all(len(ln) <= 80 for ln in res.output.splitlines()), res.output
+    info = json.loads((built / "meta/info.json").read_text())
+    for name in (*info["objects"], "down-right", "unknown"):
+        assert f"│ {name} " in res.output, name
 
 
 def test_loads_with_datasets_offline(built: Path, tmp_path: Path) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import os
 import sys
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -365,7 +366,10 @@ def info(
 
     from .dataset.summary import render, summarise
 
-    render(_run(summarise, dataset), Console(highlight=False))
+    console = Console(highlight=False)
+    if not console.is_terminal and "COLUMNS" not in os.environ:
+        console.width = 160  # a log or a pipe: room for every column, nothing folded
+    render(_run(summarise, dataset), console)
 
 
 @app.command()

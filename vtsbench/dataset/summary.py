@@ -131,8 +131,10 @@ def render(s: Summary, console: Any) -> None:
     cols = ["static", *(f"slip:{x}" for x in STATES)]
     if any("slip:unknown" in row for row in s.by_object.values()):
         cols.append("slip:unknown")
-    for c in ("object", "class", *cols):
-        t.add_column(c, justify="left" if c == "object" else "right")
+    longest = max((len(o) for o in s.by_object), default=6)
+    t.add_column("object", min_width=min(longest, 40), overflow="fold")  # names never cut
+    for c in ("class", *cols):  # "slip:press" headed "slip" over "press": fits 80 columns
+        t.add_column(c.replace(":", "\n"), justify="right", overflow="fold")
     tot = dict.fromkeys(cols, 0)
     for obj, row in sorted(s.by_object.items()):
         t.add_row(escape(obj), str(info.objects.index(obj)) if obj in info.objects else "?",
@@ -142,16 +144,16 @@ def render(s: Summary, console: Any) -> None:
     t.add_row("[bold]total[/]", "", *(f"[bold]{v}[/]" for v in tot.values()))
     console.print(t)
     d = Table(title="slip directions (state slip)", title_justify="left")
+    for c, just in (("class", "right"), ("direction", "left"), ("samples", "right")):
+        d.add_column(c, justify=just)  # one row a class: fits any terminal, never cut
     dirs = info.counts.slip.directions
     for k, name in enumerate(DIRECTION_NAMES):
-        d.add_column(f"{k} {name}", justify="right")
-    d.add_column("unknown", justify="right")
-    d.add_row(*(str(dirs.get(str(k), 0)) for k in range(len(DIRECTION_NAMES))),
-              str(dirs.get("unknown", 0)))
+        d.add_row(str(k), name, str(dirs.get(str(k), 0)))
+    d.add_row("", "unknown", str(dirs.get("unknown", 0)))
     console.print(d)
     sp = Table(title="splits", title_justify="left")
     for c in ("split", "parts"):
-        sp.add_column(c)
+        sp.add_column(c, overflow="fold")
     for name, parts in info.counts.splits.items():
         sp.add_row(escape(name), ", ".join(f"{p} {n}" for p, n in parts.items()))
     console.print(sp)
