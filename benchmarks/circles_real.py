@@ -11,11 +11,15 @@ the same held-out presses) of calibrations trained with the labelled and with th
 circles, both scored against the labels and, where there are consistent centres, against the
 sphere drawn at them (label radius).
 
+With --scales 2.5,4, every press and its background upscaled (bicubic) by each factor and its
+circle detected again: the centre's distance to the 1x detection and the radius ratio, in 1x
+pixels (does the detector hold at a sensor's full resolution, where a contact spans 40-70 px?).
+
 With --speed, the time of detecting every press's circle with and without the restarts
 (`detect_circle(restarts=...)`, alternated, best of 3) and of one `calibrate --circles detect`.
 
     .venv/bin/python benchmarks/circles_real.py [--digit-px-per-mm 21.09] [--all] [--rounds 4]
-                                                [--rmse] [--speed]
+                                                [--rmse] [--speed] [--scales 2.5,4]
 """
 
 from __future__ import annotations
@@ -175,6 +179,38 @@ def speed(folder: Path, opts: dict, repeats: int = 3) -> str:
             f"calibrate --circles detect (poly): {cal:.1f} s")
 
 
+def scales(folder: Path, opts: dict, factors: list[float]) -> list[str]:
+    """Per factor: how far the upscaled detections lie from the 1x ones (centre, radius)."""
+    import cv2
+    import numpy as np
+
+    from vtsbench.depth.calibration import load_presses
+    from vtsbench.depth.sphere import ball_radius_px, detect_circle
+
+    presses, bg, setup, _ = load_presses(folder, **opts)
+    ball = ball_radius_px(setup["ball_radius_mm"], setup["mm_per_px"])
+    base = [detect_circle(p.image, bg, ball_px=ball) for p in presses]
+    out = []
+    for f in factors:
+        def up(a: np.ndarray, f: float = f) -> np.ndarray:
+            return cv2.resize(a, None, fx=f, fy=f, interpolation=cv2.INTER_CUBIC)
+
+        big, d, ratio, lost = up(bg), [], [], 0
+        for p, b in zip(presses, base, strict=True):
+            g = detect_circle(up(p.image), big, ball_px=ball * f)
+            if g is None or b is None:
+                lost += g is None and b is not None
+                continue
+            x, y = ((g[0] + 0.5) / f - 0.5, (g[1] + 0.5) / f - 0.5)  # pixel centres
+            d.append(math.hypot(x - b[0], y - b[1]))
+            ratio.append(g[2] / f / b[2])
+        d_, r_ = np.array(d), np.array(ratio)
+        out.append(f"x{f:g}: {len(d)} presses, {lost} lost; centre from the 1x detection median "
+                   f"{np.median(d_):.2f}, max {d_.max():.2f} px (1x px), {int((d_ > 1).sum())} "
+                   f"beyond 1 px; radius x{np.median(r_):.3f} (x{r_.min():.3f}-x{r_.max():.3f})")
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--digit-px-per-mm", type=float, default=21.09)
@@ -182,6 +218,7 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=4, help="rounds of the consistent centres")
     ap.add_argument("--rmse", action="store_true", help="held-out depth error, both circles")
     ap.add_argument("--speed", action="store_true", help="detection time, restarts or not")
+    ap.add_argument("--scales", default="", help="upscale factors to detect at, e.g. 2.5,4")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         for name, folder, opts in recordings(Path(tmp), args.digit_px_per_mm):
@@ -193,6 +230,9 @@ def main() -> None:
                 print(f"{name}: consistent centres ({args.rounds} rounds) in {took:.1f} s")
             else:
                 print(f"{name}: too few presses for consistent centres")
+            if args.scales:
+                for line in scales(folder, opts, [float(f) for f in args.scales.split(",")]):
+                    print(f"{name}: {line}")
             if args.speed:
                 print(f"{name}: {speed(folder, opts)}")
             if args.rmse:

@@ -281,6 +281,43 @@ def test_cli_calibrate_no_recordings(tmp_path) -> None:
     assert len(res.stderr.strip().splitlines()) == 1
 
 
+def _pack(path, **over) -> None:
+    rng = np.random.default_rng(0)
+    arrays = {"f0": rng.integers(0, 255, (12, 16, 3), dtype=np.uint8),
+              "imgs": rng.integers(0, 255, (3, 12, 16, 3), dtype=np.uint8),
+              "touch_center": np.array([[5.0, 6.0], [7.0, 6.5], [8.0, 4.0]]),
+              "touch_radius": np.array([3.0, 4.0, 3.5])}
+    np.savez(path, **(arrays | over))
+
+
+def test_taxim_pack_takes_its_ball_and_scale(tmp_path) -> None:
+    from vtsbench.recordings.manifest import load_manifest
+
+    _pack(tmp_path / "p.npz")
+    rec = taxim_recordings(tmp_path / "p.npz", tmp_path / "rec", ball_radius_mm=2.35,
+                           mm_per_px=1 / 19.6)
+    m = load_manifest(rec)
+    assert m.sessions[0].mm_per_px == (1 / 19.6, 1 / 19.6)
+    assert [e.ball_radius_mm for e in m.entries] == [2.35] * 3
+    assert (m.entries[1].circle.x, m.entries[1].circle.y, m.entries[1].circle.r) == (7, 6.5, 4)
+
+
+@pytest.mark.parametrize("over, match", [
+    ({"imgs": np.zeros((3, 12, 15, 3), np.uint8)}, "imgs is not N x H x W x 3"),
+    ({"touch_center": np.zeros((2, 2))}, "touch_center is not 3 x 2"),
+    ({"touch_radius": np.array([3.0, np.nan, 1.0])}, "NaN or an infinity"),
+    ({"f0": np.zeros((12, 16), np.uint8)}, "f0 is not an H x W x 3 image"),
+    ({"imgs": np.zeros((3, 12, 16, 3), np.float32)}, "not 8-bit"),
+])
+def test_taxim_pack_with_wrong_arrays_is_one_error(tmp_path, over, match) -> None:
+    _pack(tmp_path / "p.npz", **over)
+    with pytest.raises(VtsError, match=match):
+        taxim_recordings(tmp_path / "p.npz", tmp_path / "rec")
+    assert not (tmp_path / "rec").exists()  # nothing written
+    with pytest.raises(VtsError, match="mm_per_px must be a positive"):
+        taxim_recordings(tmp_path / "p.npz", tmp_path / "rec", mm_per_px=float("nan"))
+
+
 # -- real presses -----------------------------------------------------------------------------
 
 
