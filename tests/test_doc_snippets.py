@@ -3,7 +3,8 @@ small simulated recordings made by the tests.
 
 Blocks of one page run in order in one namespace (a page's later examples use its earlier
 ones), in a temporary folder holding the paths the examples name: data/dataset,
-demo-data/dataset and data/ds (the test dataset) and rec/ball (simulated ball presses). A block
+demo-data/dataset and data/ds (the test dataset), rec/ball (simulated ball presses) and
+dataPack.npz (a Taxim-style pack of three presses). A block
 that cannot run here is preceded by `<!-- no-test: REASON -->`; NO_TEST_MAX keeps that list
 short.
 """
@@ -52,6 +53,13 @@ def workdir(vts_dataset: Path, tmp_path_factory: pytest.TempPathFactory) -> Path
     (work / "demo-data" / "dataset").symlink_to(vts_dataset)
     (work / "rec").mkdir()
     (work / "rec" / "ball").symlink_to(sim_folder(tmp_path_factory))
+    import numpy as np  # a Taxim-style data pack of three presses (depth.md)
+
+    rng = np.random.default_rng(0)
+    np.savez(work / "dataPack.npz", f0=rng.integers(0, 255, (12, 16, 3), dtype=np.uint8),
+             imgs=rng.integers(0, 255, (3, 12, 16, 3), dtype=np.uint8),
+             touch_center=np.array([[5.0, 6.0], [7.0, 6.5], [8.0, 4.0]]),
+             touch_radius=np.array([3.0, 4.0, 3.5]))
     return work
 
 
