@@ -11,7 +11,7 @@ import torch
 
 from vtsbench.labels import angle_to_class
 from vtsbench.models.contact_crop import contact_crop, crop_box, crop_center
-from vtsbench.models.timesformer import dihedral_augment, dihedral_average
+from vtsbench.models.symmetry import dihedral_augment, dihedral_average
 
 
 def moving_blob(dx: float, dy_rows: float, t: int = 4, h: int = 60, w: int = 80,

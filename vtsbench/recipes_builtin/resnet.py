@@ -52,9 +52,9 @@ def _normalize(x: Any, config: dict[str, Any]) -> Any:
 
 def dihedral_views(x: torch.Tensor) -> torch.Tensor:
     """(1, C, S, S) -> (8, C, S, S): the image under the 8 symmetries of the square
-    (`vtsbench.models.timesformer.dihedral`: four quarter turns, then the same mirrored).
+    (`vtsbench.models.symmetry.dihedral`: four quarter turns, then the same mirrored).
     Exact on a square crop: no resampling, no fill."""
-    from vtsbench.models.timesformer import SYMMETRIES, dihedral
+    from vtsbench.models.symmetry import SYMMETRIES, dihedral
 
     return torch.stack([dihedral(x[0], mirror, turns) for mirror, turns in SYMMETRIES])
 

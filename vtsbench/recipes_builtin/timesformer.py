@@ -242,7 +242,8 @@ class TimesformerRecipe(Recipe):
         import torch
         from torch.utils.data import Subset
 
-        from vtsbench.models.timesformer import dihedral_augment, flip_augment, masked_joint_loss
+        from vtsbench.models.symmetry import dihedral_augment
+        from vtsbench.models.timesformer import flip_augment, masked_joint_loss
         from vtsbench.training import TrainConfig, seed_everything, train_loop
 
         self._check(config)
@@ -304,7 +305,7 @@ class TimesformerRecipe(Recipe):
         load_checkpoint(checkpoint, model)
         dev = resolve_device(device)
         from vtsbench.environment import deterministic
-        from vtsbench.models.timesformer import dihedral_average
+        from vtsbench.models.symmetry import dihedral_average
 
         deterministic(config.get("threads"))
         model.to(dev).eval()
