@@ -107,9 +107,10 @@ def profile_runs(profile: str, octopi: bool, *, gpu: bool = False,
             runs.append(Run(f"resnet18-{mod}", "resnet", "static_sessions",
                             {**DEMO_RESNET, "modality": mod, "steps": DEMO_RESNET_STEPS[mod]}))
     else:
-        steps = PAPER_STEPS["gpu" if gpu else "cpu"]
+        where = "gpu" if gpu else "cpu"
+        steps = PAPER_STEPS[where]
         tsf = {**PAPER_TSF, "steps": steps["timesformer"], "pretrained_path": pretrained,
-               "batch_size": PAPER_TSF_BATCH["gpu" if gpu else "cpu"],
+               "batch_size": PAPER_TSF_BATCH[where],
                # the 8-view test-time average costs 25 s a sequence on a 2-core CPU (3 without)
                "tta": gpu,
                "pretrained": pretrained is not None}

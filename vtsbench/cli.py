@@ -87,12 +87,22 @@ def _run(fn, *args, **kwargs):
         raise typer.Exit(130) from None
 
 
-def _report(problems: list[str], warnings: list[str], summary: str) -> None:
-    """Print warnings, problems (one line each) and a summary; exit 1 if there is a problem."""
+def _console() -> Any:
+    """A rich Console on stdout: the terminal's width, or 160 columns in a pipe or a log (no
+    COLUMNS set), where rich would assume 80 and cut a table's names with an ellipsis."""
     from rich.console import Console
-    from rich.markup import escape
 
     console = Console(highlight=False)
+    if not console.is_terminal and "COLUMNS" not in os.environ:
+        console.width = 160
+    return console
+
+
+def _report(problems: list[str], warnings: list[str], summary: str) -> None:
+    """Print warnings, problems (one line each) and a summary; exit 1 if there is a problem."""
+    from rich.markup import escape
+
+    console = _console()
     for w in warnings:
         console.print(f"[yellow]warning[/] {escape(w)}", soft_wrap=True)
     for p in problems:
@@ -328,13 +338,12 @@ def build(
 
 def _print_build(res) -> None:
     """The skipped entries and a summary table of a build."""
-    from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
 
     from .dataset.summary import human
 
-    console = Console(highlight=False)
+    console = _console()
     for w in res.warnings:
         console.print(f"[yellow]warning[/] {escape(w)}", soft_wrap=True)
     for eid, why in res.skipped.items():
@@ -362,14 +371,10 @@ def info(
 ) -> None:
     """Summarise a dataset: samples per object, state, direction and split part; sizes on disk;
     versions and checksum."""
-    from rich.console import Console
 
     from .dataset.summary import render, summarise
 
-    console = Console(highlight=False)
-    if not console.is_terminal and "COLUMNS" not in os.environ:
-        console.width = 160  # a log or a pipe: room for every column, nothing folded
-    render(_run(summarise, dataset), console)
+    render(_run(summarise, dataset), _console())
 
 
 @app.command()
@@ -407,7 +412,6 @@ def export_hf(
     ClassLabel, RGB as PNG images, depth in mm; rewrites the card and records the files in
     meta/info.json. Example: [bold]vtsbench export-hf data/ds --license cc-by-4.0[/]
     """
-    from rich.console import Console
 
     from .dataset.hub import export_hf as run_export
     from .dataset.summary import human
@@ -416,7 +420,7 @@ def export_hf(
     lay = res.layout
     n = sum(f.rows for fs in lay.files.values() for f in fs)
     files = sum(len(fs) for fs in lay.files.values())
-    Console(highlight=False).print(
+    _console().print(
         f"{n} samples in {files} parquet files ({human(lay.nbytes())}) in {res.seconds:.1f} s; "
         f"configs: {', '.join(lay.configs)}")
 
@@ -438,13 +442,12 @@ def push(
     the viewer and `datasets.load_dataset`). Example:
     [bold]vtsbench push data/ds my-lab/tactile --dry-run[/]
     """
-    from rich.console import Console
 
     from .dataset.push import push as run_push
     from .dataset.push import push_plan
     from .dataset.summary import human
 
-    console = Console(highlight=False)
+    console = _console()
     plan = _run(push_plan, dataset, zarr)
     if not plan.has_hub_copy:
         console.print("[yellow]warning[/] no hf/ folder: run `vtsbench export-hf` first for "
@@ -636,7 +639,6 @@ def eval_(
 
 
 def _print_rows(title: str, head: tuple[str, ...], rows: list[tuple[str, ...]]) -> None:
-    from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
 
@@ -645,7 +647,7 @@ def _print_rows(title: str, head: tuple[str, ...], rows: list[tuple[str, ...]]) 
         t.add_column(c, justify="left" if i in (0, len(head) - 1) else "right")
     for r in rows:
         t.add_row(*(escape(x) for x in r))
-    Console(highlight=False).print(t)
+    _console().print(t)
 
 
 leaderboard_app = typer.Typer(help="Leaderboards in leaderboards/<dataset>/<split>/: add, "
