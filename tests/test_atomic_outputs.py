@@ -22,7 +22,7 @@ HELPER = "atomic.py"
 ALLOWED = {
     ("dataset/staging.py", "locked_stage"):
         "opens the lock file in append mode to hold a lock on it; writes nothing",
-    ("dataset/loader.py", "checked"):
+    ("dataset/location.py", "checked"):
         "copies a remote file into a private temporary folder to parse it; not an output",
     ("dataset/hub.py", "write_kind"):
         "streams row groups into a hidden temporary file (too large for memory) and renames "

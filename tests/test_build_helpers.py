@@ -67,3 +67,59 @@ def built(sim_recordings: Path, tmp_path_factory: pytest.TempPathFactory) -> Pat
     out = tmp_path_factory.mktemp("build-ref") / "ds"
     build(sim_recordings, out, BuildOptions(shard_mb=SHARD_MB))
     return out
+
+
+def write_info_text(ds: Path, text: str) -> None:
+    """Write meta/info.json as given (a document the dataclass cannot hold, such as a repeated
+    key), its info_sha256, when it has one, recomputed to match."""
+    from vtsbench.dataset.schema import INFO_HASH, _with_info_hash
+
+    if f'"{INFO_HASH}": "' in text:
+        text = _with_info_hash(text, hashlib.sha256(_with_info_hash(text, "").encode())
+                               .hexdigest())
+    (ds / "meta" / "info.json").write_text(text)
+
+
+def rehash(ds: Path, edit=None) -> None:
+    """Recompute every checksum of a dataset after a test changed its files, as a deliberate
+    change would: each listed file's sha256, the split files' sha256 in `splits`,
+    dataset_sha256 and info_sha256 (a 1.0 document without one stays without). edit(doc) may
+    change the info.json document first."""
+    import json
+
+    from vtsbench.dataset.schema import INFO_HASH, dataset_checksum
+
+    doc = json.loads((ds / "meta" / "info.json").read_text())
+    if edit is not None:
+        edit(doc)
+    for rel in doc["files"]:
+        if (ds / rel).is_file():
+            doc["files"][rel] = hashlib.sha256((ds / rel).read_bytes()).hexdigest()
+    for name in doc["splits"]:
+        path = ds / "meta" / "splits" / f"{name}.json"
+        if path.is_file():
+            doc["splits"][name] = hashlib.sha256(path.read_bytes()).hexdigest()
+    doc["dataset_sha256"] = dataset_checksum(doc["files"])
+    if INFO_HASH in doc:
+        doc[INFO_HASH] = doc.pop(INFO_HASH)  # last, as the build writes it
+    write_info_text(ds, json.dumps(doc, indent=1) + "\n")
+
+
+def rewrite_index(ds: Path, kind: str, change) -> None:
+    """Rewrite index/<kind>.parquet with change(table) -> table, then rehash."""
+    import pyarrow.parquet as pq
+
+    from vtsbench.dataset.index import PARQUET_OPTIONS
+
+    path = ds / "index" / f"{kind}.parquet"
+    pq.write_table(change(pq.read_table(path)), path, **PARQUET_OPTIONS)
+    rehash(ds)
+
+
+def edit_json(path: Path, change) -> None:
+    """Rewrite a JSON file of a dataset with change(doc) (which edits doc in place)."""
+    import json
+
+    doc = json.loads(path.read_text())
+    change(doc)
+    path.write_text(json.dumps(doc, indent=2))

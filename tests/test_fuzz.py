@@ -160,3 +160,190 @@ def test_fuzz_user_files(work: dict[str, Path], capsys: pytest.CaptureFixture[st
         print(f"\nfuzz: {total} inputs, {total - len(failures)} handled cleanly "
               f"({100 * (total - len(failures)) / total:.1f} %); " + "; ".join(lines))
     assert not failures, failures[:5]
+
+
+# -- damaged datasets: every checksum recomputed, so only the validator can tell --------------
+
+#: Values put into an index cell (cast to the column's type where they can be).
+CELLS = [None, float("nan"), float("inf"), -1, 0, 42, 1e9, -500.0, "ghost", "", "slip"]
+
+
+def _damage_index(ds: Path, rng: random.Random) -> str:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    from test_build_helpers import rewrite_index
+
+    kind = rng.choice(["static", "slip"])
+    table = pq.read_table(ds / "index" / f"{kind}.parquet")
+    n = len(table)
+    pick = rng.random()
+    if pick < 0.15:
+        order = list(range(n))
+        rng.shuffle(order)
+        rewrite_index(ds, kind, lambda t: t.take(pa.array(order)))
+        return f"{kind} rows permuted"
+    if pick < 0.25:
+        drop = rng.randrange(n)
+        rewrite_index(ds, kind, lambda t: t.take(pa.array([i for i in range(n) if i != drop])))
+        return f"{kind} row {drop} dropped"
+    i = rng.randrange(table.num_columns)
+    field, row, value = table.schema.field(i), rng.randrange(n), rng.choice(CELLS)
+    values = table.column(i).to_pylist()
+    values[row] = values[rng.randrange(n)] if rng.random() < 0.2 else value
+    try:
+        col = pa.array(values, field.type)
+    except (pa.ArrowException, TypeError, ValueError, OverflowError):
+        values[row] = None
+        col = pa.array(values, field.type)
+    if col.null_count and not field.nullable:  # a null where none may be: a nullable column
+        field = field.with_nullable(True)
+    rewrite_index(ds, kind, lambda t: t.set_column(i, field, col))
+    return f"{kind} {field.name}[{row}] = {values[row]!r}"
+
+
+def _damage_split(ds: Path, rng: random.Random) -> str:
+    from test_build_helpers import rehash
+
+    name = rng.choice(sorted(p.stem for p in (ds / "meta" / "splits").glob("*.json")))
+    path = ds / "meta" / "splits" / f"{name}.json"
+    doc = json.loads(path.read_text())
+    parts = sorted(doc["parts"])
+    a, b = rng.choice(parts), rng.choice(parts)
+    pick = rng.randrange(7)
+    if pick == 0 and doc["parts"][a]:  # an id also in another part (a leak)
+        doc["parts"][b] = sorted(set(doc["parts"][b]) | {rng.choice(doc["parts"][a])})
+    elif pick == 1:
+        doc["parts"][a] = sorted([*doc["parts"][a], rng.choice(["ghost", "static-00001",
+                                                               "seq-00001"])])
+        doc["parts"][a] = sorted(set(doc["parts"][a]))
+    elif pick == 2 and doc["parts"][a]:
+        doc["parts"][a] = doc["parts"][a][1:]
+    elif pick == 3:
+        doc["kind"] = "static" if doc["kind"] == "slip" else "slip"
+    elif pick == 4:
+        doc["disjoint"] = sorted(set(doc["disjoint"]) | {rng.choice(
+            ["object", "session", "location", f"object:{b}", "session:test"])})
+    elif pick == 5:
+        doc["name"] = rng.choice(["seen", "other", name])
+    else:
+        doc["parts"][f"fold{rng.randrange(3)}"] = doc["parts"].pop(a)
+    path.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
+    counts = rng.random() < 0.8  # mostly counts kept in step, so the parts themselves are tried
+    rehash(ds, lambda d: counts and d["counts"]["splits"].__setitem__(
+        name, {p: len(v) for p, v in doc["parts"].items()}))
+    return f"split {name}: change {pick}, counts {'fixed' if counts else 'kept'}"
+
+
+def _damage_zarr(ds: Path, rng: random.Random) -> str:
+    from test_build_helpers import edit_json, rehash
+
+    kind, name = rng.choice(["static", "slip"]), rng.choice(["rgb", "depth", "contact"])
+    group = rng.random() < 0.5
+    path = ds / "data" / f"{kind}.zarr" / ("zarr.json" if group else f"{name}/zarr.json")
+    key = rng.choice(["shape", "chunk", "inner", "dtype", "scale", "level", "fill"])
+
+    def change(doc: dict) -> None:
+        d = doc["consolidated_metadata"]["metadata"][name] if group else doc
+        if key == "shape":
+            d["shape"][0] += rng.choice([-1, 1])
+        elif key == "chunk":
+            d["chunk_grid"]["configuration"]["chunk_shape"][0] += 1
+        elif key == "inner":
+            d["codecs"][0]["configuration"]["chunk_shape"][-1] //= 2
+        elif key == "dtype":
+            d["data_type"] = rng.choice(["uint16", "float32", "int8"])
+        elif key == "scale":
+            d["attributes"]["scale_factor"] = 0.002
+        elif key == "level" and name != "contact":
+            d["codecs"][0]["configuration"]["codecs"][1]["configuration"]["level"] = 9
+        else:
+            d["fill_value"] = 1 if name != "contact" else True
+    edit_json(path, change)
+    rehash(ds)
+    return f"{path.relative_to(ds)}: {key}"
+
+
+def _damage_info(ds: Path, rng: random.Random) -> str:
+    from test_build_helpers import rehash
+
+    key = rng.choice(["depth_scale_mm", "frames_per_sequence", "resolution", "objects",
+                      "counts", "format_version", "splits", "samples_per_shard", "arrays"])
+
+    def edit(d: dict) -> None:
+        if key == "depth_scale_mm":
+            d[key] = rng.choice([0.002, 0.0005])
+        elif key == "frames_per_sequence":
+            d[key] += 1
+        elif key == "resolution":
+            d[key] = [d[key][1], d[key][0]]
+        elif key == "objects":
+            d[key][0] = "aaa_new" if rng.random() < 0.5 else d[key][0]
+            d[key][-1] = "zzz_new"
+        elif key == "counts":
+            d[key]["static"]["objects"][next(iter(d[key]["static"]["objects"]))] += 1
+        elif key == "format_version":
+            d[key] = "1.0"
+            d.pop("info_sha256")
+        elif key == "splits":
+            name = next(iter(d["splits"]))
+            d["splits"][f"x{name}"] = d["splits"].pop(name)
+            d["counts"]["splits"][f"x{name}"] = d["counts"]["splits"].pop(name)
+        elif key == "samples_per_shard":
+            d["zarr"]["samples_per_shard"]["static"] += 1
+        else:
+            for kind in d["shapes"]:
+                d["shapes"][kind].pop("contact")
+    rehash(ds, edit)
+    return f"info.json: {key}"
+
+
+def _use(ds: Path) -> None:
+    """Load, take every part of every split, read every array of both kinds."""
+    import vtsbench
+
+    d = vtsbench.load(ds)
+    for name in d.splits:
+        for part in d.parts(name):
+            d.split(name, part)
+    for kind in ("static", "slip"):
+        view = d.view(kind)
+        view.read(slice(None), arrays=d.arrays)
+        view.metas(range(len(view)))
+
+
+def test_fuzz_damaged_datasets(built: Path, tmp_path: Path,
+                               capsys: pytest.CaptureFixture[str]) -> None:
+    """Seeded damage to the index, split files, zarr.json and info.json, every checksum
+    recomputed: verify reports a problem exactly when the loader refuses (on load or on use),
+    and neither ever raises anything but a one-line VtsError."""
+    from vtsbench.dataset.verify import verify
+    from vtsbench.errors import VtsError
+
+    rng = random.Random(21)
+    damages = [_damage_index, _damage_split, _damage_zarr, _damage_info]
+    n, refused, bad = 0, 0, []
+    t0 = time.perf_counter()
+    while time.perf_counter() - t0 < FUZZ_SECONDS or n < 12:
+        ds = tmp_path / f"ds{n}"
+        shutil.copytree(built, ds)
+        damage = damages[n % len(damages)]
+        what = damage(ds, rng)
+        try:
+            problems = verify(ds, decode=damage is _damage_zarr).problems
+            try:
+                _use(ds)
+                refusal = None
+            except VtsError as e:
+                refusal = str(e)
+            if bool(problems) != (refusal is not None) or "\n" in (refusal or ""):
+                bad.append(f"{what}: verify {problems[:2]}, loader {refusal!r}")
+            refused += refusal is not None
+        except Exception as e:  # a traceback: never allowed
+            bad.append(f"{what}: {type(e).__name__}: {e}")
+        shutil.rmtree(ds)
+        n += 1
+    with capsys.disabled():
+        print(f"\nfuzz damaged datasets: {n} damages in {time.perf_counter() - t0:.1f} s, "
+              f"{refused} refused by both, "
+              f"{n - refused - len(bad)} accepted by both, {len(bad)} disagreements")
+    assert not bad, bad[:5]

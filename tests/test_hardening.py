@@ -102,8 +102,20 @@ def test_metadata_contradicting_arrays_refused_by_the_loader(ds: Path) -> None:
 
 
 def test_format_1_0_info_without_its_hash_still_loads(ds: Path) -> None:
+    """A genuine 1.0 dataset: its depth arrays carry the `scale` attribute 1.0 wrote."""
+    from test_build_helpers import edit_json, rehash
+
     from vtsbench.dataset.schema import load_info
 
+    def to_1_0(attrs: dict) -> None:
+        attrs["scale"] = attrs.pop("scale_factor")
+
+    for kind in ("static", "slip"):
+        group = ds / "data" / f"{kind}.zarr"
+        edit_json(group / "depth" / "zarr.json", lambda d: to_1_0(d["attributes"]))
+        edit_json(group / "zarr.json", lambda d: to_1_0(
+            d["consolidated_metadata"]["metadata"]["depth"]["attributes"]))
+    rehash(ds)
     info = load_info(ds)
     info.format_version = "1.0"
     (ds / "meta" / "info.json").write_text(info.to_json())

@@ -8,6 +8,7 @@ hand to a library that writes by name (`replacing`), and staged folders.
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import secrets
 import shutil
@@ -47,21 +48,120 @@ def replacing(path: str | os.PathLike) -> Iterator[Path]:
     try:
         yield tmp
         os.replace(tmp, path)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise write_error(e, path, tmp) from e
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
 
 
+def write_error(err: OSError, path: Path, tmp: Path) -> OSError:
+    """The error of a failed write naming its destination: a full disk (ENOSPC, EFBIG) names no
+    file, and a failed open or rename names the hidden temporary one. Others pass unchanged."""
+    if err.filename is not None and os.fspath(err.filename) != os.fspath(tmp):
+        return err  # about another file (an input read inside the block): already named
+    if path.is_dir():
+        return IsADirectoryError(errno.EISDIR, "is a folder, not a file name", str(path))
+    return OSError(err.errno, f"cannot write ({err.strerror or err})", str(path))
+
+
+#: renameat2's flag that swaps two existing paths, and the "current folder" directory fd.
+_RENAME_EXCHANGE = 2
+_AT_FDCWD = -100
+
+
+def exchange(a: Path, b: Path) -> bool:
+    """Swap two existing paths in one step (Linux renameat2 with RENAME_EXCHANGE); False where
+    the system or the filesystem cannot (another OS, an old libc, EINVAL/ENOSYS)."""
+    import ctypes
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        fn = ctypes.CDLL(None, use_errno=True).renameat2
+    except (OSError, AttributeError):
+        return False
+    fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    if fn(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP):
+        return False
+    raise OSError(err, os.strerror(err), str(b))
+
+
+def rename(src: Path, dst: Path) -> None:
+    """Rename a file or folder in one step (os.replace): for moves inside an output's own
+    hidden names, e.g. a build's state parked beside its stage."""
+    os.replace(src, dst)
+
+
+def old_copy(out: Path) -> Path:
+    """A unique hidden name beside `out` for its previous copy while it is replaced:
+    `.OUT.old-PID-HEX` (recover_dir reads the process id)."""
+    return out.with_name(f".{out.name}.old-{os.getpid()}-{secrets.token_hex(6)}")
+
+
 def replace_dir(stage: Path, out: Path) -> None:
-    """Rename a finished folder to `out`; an existing `out` is swapped out first and then
-    deleted, so `out` is never missing a moment nor half old, half new."""
-    if out.exists():
-        old = out.with_name(f".{out.name}.old-{os.getpid()}-{secrets.token_hex(6)}")
-        os.replace(out, old)
+    """Put a finished folder at `out`, so that `out` is at every instant the previous complete
+    copy or the new complete one, never missing nor half old, half new.
+
+    An existing `out` is swapped with the stage in one step (renameat2 RENAME_EXCHANGE); the
+    previous copy, then under the stage's name, is renamed to `.OUT.old-*` and deleted. Where
+    the swap is not available it takes two renames (`out` to `.OUT.old-*`, the stage to `out`):
+    a kill between them leaves `out` missing for a moment, and recover_dir, run by the next
+    write of `out`, puts the previous copy back (an error between them does it at once).
+    """
+    if not (out.exists() or out.is_symlink()):
         os.replace(stage, out)
-        shutil.rmtree(old, ignore_errors=True)
+        return
+    old = old_copy(out)
+    if exchange(stage, out):
+        os.replace(stage, old)
     else:
-        os.replace(stage, out)
+        os.replace(out, old)
+        try:
+            os.replace(stage, out)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.replace(old, out)
+            raise
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def _running(pid: int) -> bool:
+    """True when another live process has this id (POSIX; False elsewhere and for this one)."""
+    if os.name != "posix" or pid == os.getpid():
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
+
+
+def recover_dir(out: Path, marker: str | None = None) -> None:
+    """Finish what a replace_dir cut short left beside `out`: with `out` missing, the previous
+    copy in `.OUT.old-*` (holding `marker`, so complete) is put back; every other old copy is
+    deleted. Copies of a process still running are left to it."""
+    import glob
+    import re
+
+    if not out.parent.is_dir():
+        return
+    for old in sorted(out.parent.glob(f".{glob.escape(out.name)}.old-*")):
+        m = re.fullmatch(r"\.(?s:.*)\.old-(\d+)-[0-9a-f]+", old.name)
+        if m is None or _running(int(m.group(1))) or old.is_symlink() or not old.is_dir():
+            continue
+        if (not (out.exists() or out.is_symlink())
+                and (marker is None or (old / marker).is_file())):
+            os.replace(old, out)
+        else:
+            shutil.rmtree(old, ignore_errors=True)
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
@@ -98,6 +198,7 @@ def staged_dir(out: str | os.PathLike, overwrite: bool = False,
     half-written output never takes the final name.
     """
     out = Path(out)
+    recover_dir(out, marker)
     check_replaceable(out, overwrite, marker)
     out.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))

@@ -10,6 +10,7 @@ from typing import Annotated, Any, Literal
 
 import typer
 
+from . import limits as lim
 from .cli_help import install as _install_help
 
 _install_help()
@@ -67,9 +68,35 @@ def _deprecated(value: Any, old: str, new: str) -> Any:
 
 
 def _fail(err: Exception, code: int = 2) -> None:
-    """Print a user error as one line and exit (no traceback)."""
-    typer.echo(f"error: {err}", err=True)
+    """Print a user error as one line and exit (no traceback): control characters escaped and
+    over-long values cut, whatever the error quotes (a path with a newline, a huge name)."""
+    from .errors import MAX_MESSAGE, MAX_PATH, one_line
+
+    typer.echo(f"error: {one_line(err, MAX_MESSAGE + MAX_PATH + 2)}", err=True)
     raise typer.Exit(code)
+
+
+def _os_error(err: OSError) -> Exception:
+    """An OSError as a one-line user error naming its file; a full disk met by a library's own
+    write names none, so the output the command was writing (its --out, OUT or --root) is named."""
+    import errno
+
+    from .errors import VtsError
+
+    reason = err.strerror or str(err)
+    if err.filename is not None:
+        f = err.filename
+        return VtsError(reason, os.fsdecode(f) if isinstance(f, bytes) else f)
+    if err.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EROFS, errno.EIO):
+        try:  # typer >= 0.2x carries its own click
+            from typer._click.globals import get_current_context
+        except ImportError:  # pragma: no cover - older typer on the click package
+            from click import get_current_context
+        ctx = get_current_context(silent=True)
+        params = ctx.params if ctx is not None else {}
+        out = next((params[k] for k in ("out", "root") if params.get(k) is not None), None)
+        return VtsError(f"cannot write ({reason})", out)
+    return VtsError(reason)
 
 
 def _run(fn, *args, **kwargs):
@@ -81,7 +108,7 @@ def _run(fn, *args, **kwargs):
     except VtsError as e:
         _fail(e)
     except OSError as e:  # an output path that is a file or a folder, a name over 255 bytes...
-        _fail(VtsError(e.strerror or str(e), e.filename))
+        _fail(_os_error(e))
     except KeyboardInterrupt:
         typer.echo("interrupted: nothing was written under the output's final name", err=True)
         raise typer.Exit(130) from None
@@ -121,11 +148,66 @@ def _finite(value: float | None) -> float | None:
     return value
 
 
+def _text(limit: int):
+    """Option callback: a string (or each of a repeated option's strings) of at most LIMIT
+    characters; the help text states the bound."""
+    def check(value: Any) -> Any:
+        for v in value if isinstance(value, (list, tuple)) else (value,):
+            if v is not None and len(v) > limit:
+                raise typer.BadParameter(f"{len(v)} characters; at most {limit}")
+        return value
+
+    return check
+
+
+def _str_option(*decls: str, help: str, limit: int = lim.MAX_NAME, **kw: Any) -> Any:
+    """An option taking a string of at most LIMIT characters, the bound in its help."""
+    return typer.Option(*decls, callback=_text(limit), help=f"{help} At most {limit} characters.",
+                        **kw)
+
+
+def _str_argument(*, help: str, limit: int = lim.MAX_PATH_TEXT, **kw: Any) -> Any:
+    """An argument taking a string of at most LIMIT characters, the bound in its help."""
+    return typer.Argument(callback=_text(limit), help=f"{help} At most {limit} characters.",
+                          **kw)
+
+
+def _finite_in(low: float | None, high: float | None):
+    """Option callback: a finite number (NaN and infinity refused as by `_finite`) from LOW to
+    HIGH; a bound left None is the library's to check (its message names the file)."""
+    def check(value: float | None) -> float | None:
+        _finite(value)
+        if value is not None and ((low is not None and value < low)
+                                  or (high is not None and value > high)):
+            raise typer.BadParameter(f"expected a number {_bounds(low, high)}, got {value:g}")
+        return value
+
+    return check
+
+
+def _bounds(low: float | None, high: float | None) -> str:
+    if low is None:
+        return f"of at most {high:g}"
+    return f"from {low:g} to {high:g}" if high is not None else f"of at least {low:g}"
+
+
+def _number_option(*decls: str, help: str, low: float | None = None,
+                   high: float | None = None, **kw: Any) -> Any:
+    """An option taking a finite number within its bounds, stated in its help."""
+    bound = _bounds(low, high).removeprefix("of ")
+    return typer.Option(*decls, callback=_finite_in(low, high),
+                        help=f"{help} {bound[0].upper()}{bound[1:]}.", **kw)
+
+
 def _parse_size(text: str) -> tuple[int, int]:
+    """--size HxW as (height, width); the bounds are the library's (simulate checks them)."""
+    from .errors import one_line
+
     try:
         h, w = (int(v) for v in text.lower().split("x"))
     except ValueError:
-        raise typer.BadParameter(f"expected HxW such as 480x640, got {text!r}") from None
+        raise typer.BadParameter(f"expected HxW such as 480x640, got {one_line(repr(text), 40)}"
+                                 ) from None
     if h < 1 or w < 1:
         raise typer.BadParameter("height and width must be positive")
     return h, w
@@ -135,21 +217,30 @@ def _parse_size(text: str) -> tuple[int, int]:
 def simulate(
     out: Annotated[Path, typer.Argument(help="Recordings folder to create.")],
     seed: Annotated[int, typer.Option(
+        min=0, max=lim.MAX_SEED,
         help="Random seed; the same seed writes identical files.")] = 0,
-    static: Annotated[int, typer.Option("--static", min=0, help="Static frames.")] = 30,
+    static: Annotated[int, typer.Option("--static", min=0, max=lim.MAX_SIM_ENTRIES,
+                                        help="Static frames.")] = 30,
     sequences: Annotated[int, typer.Option(
-        "--sequences", min=0, help="Sequences (static, press and slip, balanced).")] = 30,
-    presses: Annotated[int, typer.Option("--presses", min=0,
+        "--sequences", min=0, max=lim.MAX_SIM_ENTRIES,
+        help="Sequences (static, press and slip, balanced).")] = 30,
+    presses: Annotated[int, typer.Option("--presses", min=0, max=lim.MAX_SIM_ENTRIES,
                                          help="Calibration presses of a 3 mm-radius sphere.")] = 20,
     objects: Annotated[int, typer.Option("--objects", min=1, max=15,
                                          help="Number of object classes to use (of 15).")] = 15,
-    size: Annotated[str, typer.Option(help="Frame size HxW.")] = "480x640",
-    frames: Annotated[int, typer.Option(min=2, help="Frames per sequence.")] = 8,
-    sessions: Annotated[int, typer.Option(min=1, help="Sessions (backgrounds, noise draws).")] = 3,
+    size: Annotated[str, typer.Option(
+        help=f"Frame size HxW, each side 32 to {lim.MAX_SIDE_PX} pixels.")] = "480x640",
+    frames: Annotated[int, typer.Option(
+        min=2, max=lim.MAX_FRAMES,
+        help=f"Frames per sequence; frames x height x width at most "
+             f"{lim.MAX_SEQUENCE_PIXELS // 10**6} million (325 frames of 480x640).")] = 8,
+    sessions: Annotated[int, typer.Option(
+        min=1, max=lim.MAX_SIM_SESSIONS, help="Sessions (backgrounds, noise draws).")] = 3,
     mm_per_px: Annotated[float, typer.Option(
         callback=_finite,
-        min=1e-4, help="Scale of the sensor, mm per pixel.")] = 0.03,
-    workers: Annotated[int, typer.Option(min=1, help="Worker processes.")] = 1,
+        min=1e-4, max=10.0, help="Scale of the sensor, mm per pixel.")] = 0.03,
+    workers: Annotated[int, typer.Option(min=1, max=lim.MAX_WORKERS,
+                                         help="Worker processes.")] = 1,
     overwrite: Annotated[bool, typer.Option(
         "--overwrite", help="Replace OUT if it exists.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
@@ -171,7 +262,8 @@ def check(
     folder: Annotated[Path, typer.Argument(help="Recordings folder (with recordings.json).")],
     deep: Annotated[bool, typer.Option(
         "--deep", help="Decode every frame of every video (slow).")] = False,
-    workers: Annotated[int, typer.Option(min=1, help="Threads reading media.")] = 2,
+    workers: Annotated[int, typer.Option(min=1, max=lim.MAX_WORKERS,
+                                         help="Threads reading media.")] = 2,
     labels: Annotated[Path | None, typer.Option(
         help="Labels CSV given to `vtsbench manifest --labels`: list its rows that match no "
              "entry.")] = None,
@@ -195,34 +287,38 @@ def check(
 @app.command()
 def manifest(
     folder: Annotated[Path, typer.Argument(help="Folder of existing files to describe.")],
-    pattern: Annotated[str, typer.Option(
+    pattern: Annotated[str, _str_option(
+        limit=lim.MAX_PATH_TEXT,
         help="File-name pattern relative to FOLDER, e.g. '{object}_{take}.mov'. Fields: object, "
              "take, session, state, direction; '{name:d}' matches digits only; fields match "
              "greedily from the left; '/' matches sub-folders.")],
     kind: Annotated[Literal["static", "sequence", "press"] | None, _choice(
         help="static, sequence or press (default: sequence for videos and image folders, "
              "static for images).")] = None,
-    sensor: Annotated[str, typer.Option(help="Sensor id.")] = "unknown",
-    session: Annotated[str, typer.Option(
+    sensor: Annotated[str, _str_option(help="Sensor id.")] = "unknown",
+    session: Annotated[str, _str_option(
         help="Session id when the pattern has no {session}.")] = "s0",
-    mm_per_px: Annotated[float | None, typer.Option(
-        callback=_finite, help="mm per pixel, if known.")] = None,
-    fps: Annotated[float | None, typer.Option(
-        callback=_finite,
+    mm_per_px: Annotated[float | None, _number_option(
+        high=lim.MAX_MM_PER_PX,
+        help="mm per pixel, if known.")] = None,
+    fps: Annotated[float | None, _number_option(
+        high=lim.MAX_FPS,
         help="Frame rate (default: read from videos).")] = None,
-    background: Annotated[str | None, typer.Option(
-        help="No-contact frame, relative to FOLDER.")] = None,
-    ball_radius_mm: Annotated[float | None, typer.Option(
-        callback=_finite,
+    background: Annotated[str | None, _str_option(
+        limit=lim.MAX_PATH_TEXT, help="No-contact frame, relative to FOLDER.")] = None,
+    ball_radius_mm: Annotated[float | None, _number_option(
+        high=lim.MAX_MM,
         help="Ball radius in mm for presses.")] = None,
     circles: Annotated[Path | None, typer.Option(
         help="CSV of press circles: a file column (file|img_names|image|name) and x|center_x, "
              "y|center_y, r|radius in pixels.")] = None,
     window: Annotated[int | None, typer.Option(
-        min=1, help="Cut videos and folders into sequences of this many frames.")] = None,
+        min=1, max=lim.MAX_FRAMES,
+        help="Cut videos and folders into sequences of this many frames.")] = None,
     stride: Annotated[int | None, typer.Option(
-        min=1, help="Step between windows; with --kind static, a static frame every STRIDE "
-                    "frames of each video or image folder (else its first frame).")] = None,
+        min=1, max=lim.MAX_STRIDE,
+        help="Step between windows; with --kind static, a static frame every STRIDE "
+             "frames of each video or image folder (else its first frame).")] = None,
     overwrite: Annotated[bool, typer.Option(
         "--overwrite", help="Replace an existing recordings.json.")] = False,
     force: Annotated[bool, typer.Option("--force", hidden=True)] = False,
@@ -233,7 +329,8 @@ def manifest(
         help="CSV of labels: a file column (file|path|folder, relative to FOLDER; a folder "
              "labels everything in it), optional start,stop frames, and state, direction, "
              "press_depth_mm, object, take or any other column (kept as a field).")] = None,
-    marker: Annotated[list[str] | None, typer.Option(
+    marker: Annotated[list[str] | None, _str_option(
+        limit=lim.MAX_PATH_TEXT,
         help="FILE:FIELD=VALUE: entries with FILE in their folder (or a folder above) get the "
              "label, e.g. slip.txt:state=slip; '!FILE:...' when FILE is absent. Repeatable.")
     ] = None,
@@ -259,14 +356,43 @@ def manifest(
 def preview(
     folder: Annotated[Path, typer.Argument(help="Recordings folder.")],
     out: Annotated[Path, typer.Option("--out", help="PNG to write.")] = Path("preview.png"),
-    n: Annotated[int, typer.Option("-n", "--n", min=1, help="Entries to show.")] = 12,
-    seed: Annotated[int, typer.Option(help="Which entries to pick (spread over kinds).")] = 0,
+    n: Annotated[int, typer.Option("-n", "--n", min=1, max=200, help="Entries to show.")] = 12,
+    seed: Annotated[int, typer.Option(
+        min=0, max=lim.MAX_SEED, help="Which entries to pick (spread over kinds).")] = 0,
 ) -> None:
     """Write a contact sheet: frames with their labels and, for simulated data, the true depth."""
     from .preview import write_preview
 
     shown = _run(write_preview, folder, out, n=n, seed=seed)
     typer.echo(f"wrote {out} ({shown} entries)")
+
+
+@app.command()
+def stats(
+    folder: Annotated[Path, typer.Argument(help="Recordings folder (with recordings.json).")],
+    compare: Annotated[Path | None, typer.Option(
+        help="A second recordings folder, measured the same way and shown side by side.")] = None,
+    out: Annotated[Path | None, typer.Option(
+        help="JSON file to write (schemas/stats.schema.json).")] = None,
+    window: Annotated[int, typer.Option(
+        min=2, max=lim.MAX_FRAMES, help="Frames per window (longer sequences are cut).")] = 8,
+    max_windows: Annotated[int, typer.Option(
+        min=1, max=100_000, help="Most windows measured per folder, spread evenly.")] = 200,
+    quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
+) -> None:
+    """Motion and appearance statistics per window: rigidity of the motion, rotation, strain,
+    jerks, imprint texture, noise, contact made or lost (see docs/simulator.md).
+
+    Example: [bold]vtsbench stats data/sim --compare recordings/lab --out stats.json[/]
+    """
+    from .stats import run_stats
+    from .stats.table import print_stats
+
+    folders = _run(run_stats, folder, compare, out, window=window, max_windows=max_windows,
+                   progress=not quiet)
+    print_stats(folders, _console())
+    if out is not None:
+        typer.echo(f"wrote {out}")
 
 
 @app.command()
@@ -282,10 +408,13 @@ def build(
     no_depth: Annotated[bool, typer.Option(
         "--no-depth", help="RGB only: no depth or contact arrays, no calibration needed (for "
                            "sensors without calibration presses).")] = False,
-    frames: Annotated[int, typer.Option(min=1, help="Frames per slip sample (T).")] = 8,
+    frames: Annotated[int, typer.Option(min=1, max=lim.MAX_FRAMES,
+                                        help="Frames per slip sample (T).")] = 8,
     workers: Annotated[int, typer.Option(
-        min=1, help="Worker processes (or Dask workers with --scheduler local).")] = 1,
-    scheduler: Annotated[str | None, typer.Option(
+        min=1, max=lim.MAX_WORKERS,
+        help="Worker processes (or Dask workers with --scheduler local).")] = 1,
+    scheduler: Annotated[str | None, _str_option(
+        limit=lim.MAX_PATH_TEXT,
         help="Dask scheduler address (tcp://host:8786), or 'local' for a LocalCluster of "
              "--workers processes. OUT must be on a file system the workers share.")] = None,
     skip_bad: Annotated[bool, typer.Option(
@@ -293,15 +422,17 @@ def build(
              "stopping.")] = False,
     overwrite: Annotated[bool, typer.Option(
         "--overwrite", help="Replace OUT if it exists.")] = False,
-    dataset_version: Annotated[str, typer.Option(
+    dataset_version: Annotated[str, _str_option(
+        limit=lim.MAX_VERSION,
         help="The dataset's version (semantic version of its content; `vtsbench --version` is "
              "the program's).")] = "1.0.0",
     version: Annotated[str | None, typer.Option("--version", hidden=True)] = None,
     compression_level: Annotated[int, typer.Option(
         min=0, max=22, help="zstd level of the arrays; 0 stores them uncompressed.")] = 3,
-    seed: Annotated[int, typer.Option(min=0, help="Seed of the split files.")] = 0,
-    shard_mb: Annotated[float, typer.Option(
-        callback=_finite,
+    seed: Annotated[int, typer.Option(min=0, max=lim.MAX_SEED,
+                                      help="Seed of the split files.")] = 0,
+    shard_mb: Annotated[float, _number_option(
+        low=lim.MIN_SHARD_MB, high=lim.MAX_SHARD_MB,
         help="Target uncompressed RGB shard size in MB (whole samples per shard).")] = 32.0,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bars.")] = False,
     holdout_objects: Annotated[Path | None, typer.Option(
@@ -365,7 +496,7 @@ def _print_build(res) -> None:
 
 @app.command()
 def info(
-    dataset: Annotated[str, typer.Argument(
+    dataset: Annotated[str, _str_argument(
         help="Dataset folder (made by vtsbench build), or a URL as vtsbench.load takes "
              "(file://, http(s)://, s3://...).")],
 ) -> None:
@@ -379,7 +510,7 @@ def info(
 
 @app.command()
 def verify(
-    dataset: Annotated[str, typer.Argument(
+    dataset: Annotated[str, _str_argument(
         help="Dataset folder (made by vtsbench build), or a URL as vtsbench.load takes "
              "(file://, http(s)://, s3://...; a remote one is fetched to a temporary "
              "folder).")],
@@ -401,8 +532,9 @@ def verify(
 @app.command("export-hf")
 def export_hf(
     dataset: Annotated[Path, typer.Argument(help="Dataset folder (made by vtsbench build).")],
-    workers: Annotated[int, typer.Option(min=1, help="Threads encoding the PNGs.")] = 1,
-    license: Annotated[str, typer.Option(
+    workers: Annotated[int, typer.Option(min=1, max=lim.MAX_WORKERS,
+                                         help="Threads encoding the PNGs.")] = 1,
+    license: Annotated[str, _str_option(
         help="License id for the card (a Hub license id: cc-by-4.0, mit, other...).")
     ] = "unknown",
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
@@ -410,7 +542,9 @@ def export_hf(
     """Write every sample as parquet under DATASET/hf/ for Hugging Face `datasets`: one config
     per split scheme (slip_unseen_objects, slip_seen, static_sessions, ...), labels as
     ClassLabel, RGB as PNG images, depth in mm; rewrites the card and records the files in
-    meta/info.json. Example: [bold]vtsbench export-hf data/ds --license cc-by-4.0[/]
+    meta/info.json. The new version is made beside DATASET (.DATASET.hf.partial) and swapped
+    in whole: an interrupted export leaves DATASET as it was and a rerun resumes.
+    Example: [bold]vtsbench export-hf data/ds --license cc-by-4.0[/]
     """
 
     from .dataset.hub import export_hf as run_export
@@ -421,14 +555,16 @@ def export_hf(
     n = sum(f.rows for fs in lay.files.values() for f in fs)
     files = sum(len(fs) for fs in lay.files.values())
     _console().print(
-        f"{n} samples in {files} parquet files ({human(lay.nbytes())}) in {res.seconds:.1f} s; "
+        f"{n} samples in {files} parquet files ({human(lay.nbytes())}) in {res.seconds:.1f} s"
+        f"{f' ({res.kept} kept from an interrupted export)' if res.kept else ''}; "
         f"configs: {', '.join(lay.configs)}")
 
 
 @app.command()
 def push(
     dataset: Annotated[Path, typer.Argument(help="Dataset folder (made by vtsbench build).")],
-    repo_id: Annotated[str, typer.Argument(help="Hub dataset repository, e.g. my-lab/tactile.")],
+    repo_id: Annotated[str, _str_argument(limit=lim.MAX_NAME,
+                                          help="Hub dataset repository, e.g. my-lab/tactile.")],
     dry_run: Annotated[bool, typer.Option(
         "--dry-run", help="List what would be uploaded and stop (no network).")] = False,
     zarr: Annotated[bool, typer.Option(
@@ -436,7 +572,7 @@ def push(
              "--no-zarr uploads the parquet copy, index, splits and card only.")] = True,
     private: Annotated[bool, typer.Option(
         "--private", help="Create the repository private.")] = False,
-    revision: Annotated[str | None, typer.Option(help="Branch to push to.")] = None,
+    revision: Annotated[str | None, _str_option(help="Branch to push to.")] = None,
 ) -> None:
     """Upload a verified dataset to the Hugging Face Hub (run `vtsbench export-hf` first for
     the viewer and `datasets.load_dataset`). Example:
@@ -448,7 +584,7 @@ def push(
     from .dataset.summary import human
 
     console = _console()
-    plan = _run(push_plan, dataset, zarr)
+    plan = _run(push_plan, dataset, zarr, repo_id)
     if not plan.has_hub_copy:
         console.print("[yellow]warning[/] no hf/ folder: run `vtsbench export-hf` first for "
                       "the Hub viewer and datasets.load_dataset configs", soft_wrap=True)
@@ -471,10 +607,12 @@ def calibrate(
         help="lut (fast lookup), poly (polynomial) or mlp (small network, needs torch).")
     ] = "poly",
     holdout: Annotated[int | None, typer.Option(
-        min=0, help="Presses kept out of training and scored (default: a fifth).")] = None,
-    seed: Annotated[int, typer.Option(help="Seed of the hold-out choice, sampling, mlp.")] = 0,
-    mm_per_px: Annotated[float | None, typer.Option(
-        callback=_finite,
+        min=0, max=lim.MAX_COUNT,
+        help="Presses kept out of training and scored (default: a fifth).")] = None,
+    seed: Annotated[int, typer.Option(
+        min=0, max=lim.MAX_SEED, help="Seed of the hold-out choice, sampling, mlp.")] = 0,
+    mm_per_px: Annotated[float | None, _number_option(
+        high=100.0,
         help="Scale in mm per pixel (default: from the recordings).")] = None,
     background: Annotated[Path | None, typer.Option(
         help="No-contact image (default: the sessions' backgrounds).")] = None,
@@ -487,15 +625,21 @@ def calibrate(
         help="Poisson solver scoring the held-out presses: dct, dst or masked.")] = "dct",
     device: Annotated[Literal["auto", "cpu", "cuda"], _choice(
         help="mlp training device: auto (CUDA when present), cpu or cuda.")] = "auto",
-    bins: Annotated[int | None, typer.Option(help="lut: colour bins per channel (32).")] = None,
+    bins: Annotated[int | None, typer.Option(
+        min=2, max=256,
+        help="lut: colour bins per channel (32); bins^3 x cells^2 at most 2^26.")] = None,
     cells: Annotated[int | None, typer.Option(
-        help="lut: spatial cells per side (2).")] = None,
-    degree: Annotated[int | None, typer.Option(help="poly: colour degree (3).")] = None,
+        min=1, max=64, help="lut: spatial cells per side (2).")] = None,
+    degree: Annotated[int | None, typer.Option(
+        min=1, max=8, help="poly: colour degree (3).")] = None,
     pos_degree: Annotated[int | None, typer.Option(
-        help="poly, mlp: degree of the position polynomial (2).")] = None,
-    width: Annotated[int | None, typer.Option(help="mlp: units per hidden layer (32).")] = None,
-    depth: Annotated[int | None, typer.Option(help="mlp: hidden layers (3).")] = None,
-    epochs: Annotated[int | None, typer.Option(help="mlp: training epochs (40).")] = None,
+        min=0, max=4, help="poly, mlp: degree of the position polynomial (2).")] = None,
+    width: Annotated[int | None, typer.Option(
+        min=1, max=4096, help="mlp: units per hidden layer (32).")] = None,
+    depth: Annotated[int | None, typer.Option(min=1, max=32, help="mlp: hidden layers (3).")
+                     ] = None,
+    epochs: Annotated[int | None, typer.Option(
+        min=1, max=100_000, help="mlp: training epochs (40).")] = None,
     circles: Annotated[Literal["label", "detect"], _choice(
         help="label: use labelled circles, detect the others; detect: detect every circle "
              "(labels only compared, in report.json).")] = "label",
@@ -571,7 +715,7 @@ def calibrate(
 
 @app.command()
 def depth(
-    images: Annotated[list[str], typer.Argument(
+    images: Annotated[list[str], _str_argument(
         help="Images, folders of images, videos or globs such as 'takes/*.mp4' (quoted).")],
     calibration: Annotated[Path, typer.Option(help="Calibration file from `vtsbench calibrate`.")],
     solver: Annotated[Literal["dct", "dst", "masked"], _choice(
@@ -582,8 +726,8 @@ def depth(
     ] = Path("depth"),
     device: Annotated[Literal["auto", "cpu", "cuda", "numpy"], _choice(
         help="auto (CUDA when present, else numpy), cpu or cuda (torch), numpy.")] = "auto",
-    batch: Annotated[int, typer.Option(min=1, help="Frames per step.")] = 8,
-    range_: Annotated[str | None, typer.Option(
+    batch: Annotated[int, typer.Option(min=1, max=1024, help="Frames per step.")] = 8,
+    range_: Annotated[str | None, _str_option(
         "--range", help="Fixed colour scale of the PNGs, MIN,MAX in mm (e.g. -0.2,1.5), the "
                         "same for every frame (default: each frame's own; negative depth is "
                         "drawn in red).")] = None,
@@ -609,8 +753,10 @@ def depth(
 def eval_(
     submission: Annotated[Path, typer.Argument(help="Predictions: CSV or parquet.")],
     dataset: Annotated[Path, typer.Option(help="Dataset folder (made by vtsbench build).")],
-    split: Annotated[str, typer.Option(help="Split scheme, e.g. unseen_objects or seen.")],
-    part: Annotated[str, typer.Option(help="Part of the split to score.")] = "test",
+    split: Annotated[str, _str_option(limit=lim.MAX_SPLIT,
+                                      help="Split scheme, e.g. unseen_objects or seen.")],
+    part: Annotated[str, _str_option(limit=lim.MAX_SPLIT,
+                                     help="Part of the split to score.")] = "test",
     out: Annotated[Path | None, typer.Option(
         help="Write metrics.json, report.md and confusion-matrix PNGs here.")] = None,
     meta: Annotated[Path | None, typer.Option(
@@ -660,8 +806,8 @@ _ROOT = Annotated[Path, typer.Option("--root", help="Leaderboards folder.")]
 def leaderboard_add(
     submission: Annotated[Path, typer.Argument(help="Predictions: CSV or parquet.")],
     dataset: Annotated[Path, typer.Option(help="Dataset folder.")],
-    split: Annotated[str, typer.Option(help="Split scheme.")],
-    part: Annotated[str, typer.Option(help="Part of the split.")] = "test",
+    split: Annotated[str, _str_option(limit=lim.MAX_SPLIT, help="Split scheme.")],
+    part: Annotated[str, _str_option(limit=lim.MAX_SPLIT, help="Part of the split.")] = "test",
     meta: Annotated[Path | None, typer.Option(help="Metadata JSON.")] = None,
     root: _ROOT = Path("leaderboards"),
     overwrite: Annotated[bool, typer.Option(
@@ -705,15 +851,19 @@ def leaderboard_rescore(
 
 @app.command()
 def train(
-    recipe: Annotated[str, typer.Argument(help="Recipe: a registered name or a .py file.")],
+    recipe: Annotated[str, _str_argument(
+        help="Recipe: a registered name (flow, timesformer, resnet...; a name wins over a file "
+             "of that name in the working folder) or a file: NAME.py, ./NAME.")],
     dataset: Annotated[Path, typer.Option(help="Dataset folder.")],
-    split: Annotated[str, typer.Option(help="Split scheme; trains on its train part.")],
+    split: Annotated[str, _str_option(limit=lim.MAX_SPLIT,
+                                      help="Split scheme; trains on its train part.")],
     out: Annotated[Path, typer.Option(help="Output folder (checkpoints).")],
     config: Annotated[Path | None, typer.Option(
         help="JSON or TOML file overriding keys of the recipe's default config.")] = None,
-    seed: Annotated[int, typer.Option(min=0, help="Random seed.")] = 0,
+    seed: Annotated[int, typer.Option(min=0, max=lim.MAX_SEED, help="Random seed.")] = 0,
     device: Annotated[str, _open_choice(
-        "auto", "cpu", "cuda", help="auto (CUDA when present), cpu, cuda, cuda:1...")] = "auto",
+        "auto", "cpu", "cuda", callback=_text(64),
+        help="auto (CUDA when present), cpu, cuda, cuda:1... At most 64 characters.")] = "auto",
     resume: Annotated[bool, typer.Option(
         "--resume/--no-resume", help="Continue from the last checkpoint in --out.")] = True,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
@@ -726,15 +876,15 @@ def train(
     import json
 
     from .atomic import write_text_atomic
-    from .recipes import load_config, load_recipe
+    from .recipes import guarded, load_config, load_recipe
 
     rec = _run(load_recipe, recipe)
     cfg = _run(load_config, rec, config)
     existed = out.exists()
     _run(out.mkdir, parents=True, exist_ok=True)
     try:
-        ckpt = _run(rec.train, dataset, split, out, cfg, seed=seed, device=device,
-                    resume=resume, progress=not quiet)
+        ckpt = _run(guarded(rec.train, f"recipe {recipe}"), dataset, split, out, cfg, seed=seed,
+                    device=device, resume=resume, progress=not quiet)
     except BaseException:
         # a run that failed before its first checkpoint leaves no folder behind (one that has
         # checkpoints keeps them, so that the next train resumes)
@@ -749,17 +899,22 @@ def train(
 
 @app.command()
 def predict(
-    recipe: Annotated[str, typer.Argument(help="Recipe: a registered name or a .py file.")],
+    recipe: Annotated[str, _str_argument(
+        help="Recipe: a registered name (flow, timesformer, resnet...; a name wins over a file "
+             "of that name in the working folder) or a file: NAME.py, ./NAME.")],
     checkpoint: Annotated[Path, typer.Argument(help="Checkpoint written by vtsbench train.")],
     dataset: Annotated[Path, typer.Option(help="Dataset folder.")],
-    split: Annotated[str, typer.Option(help="Split scheme.")],
+    split: Annotated[str, _str_option(limit=lim.MAX_SPLIT, help="Split scheme.")],
     out: Annotated[Path, typer.Option(help="Submission CSV to write (+ OUT.meta.json).")],
-    part: Annotated[str, typer.Option(help="Part of the split to predict.")] = "test",
-    device: Annotated[str, _open_choice("auto", "cpu", "cuda",
-                                        help="auto, cpu, cuda, cuda:1...")] = "auto",
-    method: Annotated[str | None, typer.Option(
+    part: Annotated[str, _str_option(limit=lim.MAX_SPLIT,
+                                     help="Part of the split to predict.")] = "test",
+    device: Annotated[str, _open_choice(
+        "auto", "cpu", "cuda", callback=_text(64),
+        help="auto, cpu, cuda, cuda:1... At most 64 characters.")] = "auto",
+    method: Annotated[str | None, _str_option(
         help="Method name in the metadata (default: the recipe's name).")] = None,
-    seed: Annotated[int, typer.Option(min=0, help="Training seed, for the metadata.")] = 0,
+    seed: Annotated[int, typer.Option(min=0, max=lim.MAX_SEED,
+                                      help="Training seed, for the metadata.")] = 0,
 ) -> None:
     """Predict a split part with a trained recipe; writes a submission vtsbench eval accepts.
 
@@ -768,14 +923,16 @@ def predict(
     """
     import time
 
-    from .recipes import check_checkpoint, load_recipe, write_submission
+    from .errors import VtsError
+    from .recipes import check_checkpoint, guarded, load_recipe, write_submission
 
     rec = _run(load_recipe, recipe)
     if not checkpoint.exists():
-        _fail(FileNotFoundError(f"checkpoint not found: {checkpoint}"))
+        _fail(VtsError("checkpoint not found", checkpoint))
     _run(check_checkpoint, checkpoint)
     t0 = time.perf_counter()
-    rows = _run(rec.predict, checkpoint, dataset, split, part, device=device)
+    rows = _run(guarded(rec.predict, f"recipe {recipe}"), checkpoint, dataset, split, part,
+                device=device)
     wall = time.perf_counter() - t0
     n = len({r["sample_id"] for r in rows})
     extra = {"split": split, "part": part, "checkpoint": str(checkpoint),
@@ -800,60 +957,65 @@ def predict(
 @app.command()
 def collect(
     out: Annotated[Path, typer.Argument(help="Recordings folder to create (or add to, --append).")],
-    source: Annotated[str, typer.Option(help="Camera index (0, 1, ...) or video file.")],
-    session: Annotated[str, typer.Option(help="Session id (one sitting of one sensor).")] = "s0",
-    sensor: Annotated[str | None, typer.Option(
+    source: Annotated[str, _str_option(limit=lim.MAX_PATH_TEXT,
+                                       help="Camera index (0, 1, ...) or video file.")],
+    session: Annotated[str, _str_option(help="Session id (one sitting of one sensor).")] = "s0",
+    sensor: Annotated[str | None, _str_option(
         help="Sensor id (new session; default 'unknown').")] = None,
-    mm_per_px: Annotated[float | None, typer.Option(
-        callback=_finite, help="Scale, mm per pixel.")] = None,
-    fps: Annotated[float | None, typer.Option(
-        callback=_finite,
+    mm_per_px: Annotated[float | None, _number_option(
+        high=lim.MAX_MM_PER_PX, help="Scale, mm per pixel.")] = None,
+    fps: Annotated[float | None, _number_option(
+        high=lim.MAX_FPS,
         help="Frame rate (default: as the source reports it).")] = None,
-    mount_rotation: Annotated[float | None, typer.Option(
-        callback=_finite,
+    mount_rotation: Annotated[float | None, _number_option(
+        low=-360.0, high=360.0,
         help="Mount: rotate stage motion CCW by this many degrees into the image (default 0).")
     ] = None,
     mount_mirror: Annotated[bool | None, typer.Option(
         "--mount-mirror/--no-mount-mirror",
         help="Mount: mirror stage x before rotating (default off).")] = None,
     background_frames: Annotated[int, typer.Option(
-        min=0, help="Leading no-contact frames: the background is their median; never cut "
-                    "into entries.")] = 10,
+        min=0, max=1000,
+        help="Leading no-contact frames: the background is their median; never cut into "
+             "entries.")] = 10,
     background: Annotated[Path | None, typer.Option(
         help="Background image file for a new session, instead of the median.")] = None,
     kind: Annotated[Literal["sequence", "static", "press"], _choice(
         help="sequence, static or press.")] = "sequence",
-    window: Annotated[int, typer.Option(min=2, help="Frames per sequence window.")] = 8,
+    window: Annotated[int, typer.Option(min=2, max=lim.MAX_FRAMES,
+                                        help="Frames per sequence window.")] = 8,
     stride: Annotated[int | None, typer.Option(
-        min=1, help="Step between windows (default: --window).")] = None,
+        min=1, max=lim.MAX_STRIDE, help="Step between windows (default: --window).")] = None,
     every: Annotated[int, typer.Option(
-        min=1, help="static: keep every K-th frame; press: at most one frame per K.")] = 10,
-    ball_radius_mm: Annotated[float | None, typer.Option(
-        callback=_finite,
+        min=1, max=lim.MAX_STRIDE,
+        help="static: keep every K-th frame; press: at most one frame per K.")] = 10,
+    ball_radius_mm: Annotated[float | None, _number_option(
+        high=lim.MAX_MM,
         help="Indenter ball radius in mm (required for --kind press).")] = None,
     ball_radius: Annotated[float | None, typer.Option(
         "--ball-radius", callback=_finite, hidden=True)] = None,
-    contact_level: Annotated[float, typer.Option(
-        callback=_finite,
+    contact_level: Annotated[float, _number_option(
+        low=0.0, high=255.0,
         help="press: gray levels of (blurred) change that count as contact.")] = 10.0,
-    contact_area: Annotated[float, typer.Option(
-        callback=_finite,
+    contact_area: Annotated[float, _number_option(
+        high=1.0,
         help="press: fraction of pixels in contact that makes a press frame.")] = 0.001,
-    object_name: Annotated[str | None, typer.Option("--object", help="Object label.")] = None,
-    take: Annotated[str | None, typer.Option(
+    object_name: Annotated[str | None, _str_option("--object", help="Object label.")] = None,
+    take: Annotated[str | None, _str_option(
         help="Take name (default: next free number).")] = None,
     max_frames: Annotated[int | None, typer.Option(
-        min=1, help="Stop after this many frames (background included).")] = None,
+        min=1, max=lim.MAX_TAKE_FRAMES,
+        help="Stop after this many frames (background included).")] = None,
     motion_log: Annotated[Path | None, typer.Option(
         help="CSV with columns t_s,x_mm,y_mm,z_mm (stage motion; z into the gel).")] = None,
-    log_offset: Annotated[float, typer.Option(
-        callback=_finite,
+    log_offset: Annotated[float, _number_option(
+        low=-1e6, high=1e6,
         help="Log time of frame 0 in seconds: frame i is at i / fps + offset.")] = 0.0,
-    slip_threshold_mm: Annotated[float | None, typer.Option(
-        callback=_finite,
+    slip_threshold_mm: Annotated[float | None, _number_option(
+        high=lim.MAX_MM,
         help="Lateral motion (mm) over a window that makes a slip (default 0.05).")] = None,
-    press_threshold_mm: Annotated[float | None, typer.Option(
-        callback=_finite,
+    press_threshold_mm: Annotated[float | None, _number_option(
+        high=lim.MAX_MM,
         help="Indentation increase (mm) over a window that makes a press (default 0.05).")
     ] = None,
     append: Annotated[bool, typer.Option(
@@ -904,7 +1066,9 @@ def main() -> None:
         ctx = getattr(e, "ctx", None)
         hint = f" (see `{ctx.command_path} --help`)" if ctx is not None else ""
         if e.format_message():  # empty after a group's help was shown for no command
-            print(f"error: {e.format_message()}{hint}", file=sys.stderr)
+            from .errors import one_line
+
+            print(f"error: {one_line(e.format_message())}{hint}", file=sys.stderr)
         sys.exit(getattr(e, "exit_code", 2))
     # a command's typer.Exit(code) comes back as its code; a command that returns is a success
     sys.exit(rv if isinstance(rv, int) else 0)

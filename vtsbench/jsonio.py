@@ -33,12 +33,27 @@ def _finite_float(text: str) -> float:
     return v
 
 
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """An object whose keys are all different: with a repeated key, one reader would see the
+    first value and another the last (Python's json keeps the last)."""
+    out = dict(pairs)
+    if len(out) != len(pairs):
+        seen: set[str] = set()
+        for key, _ in pairs:
+            if key in seen:
+                shown = key if len(key) <= 40 else key[:40] + "..."
+                raise ValueError(f"key {shown!r} appears more than once in one object")
+            seen.add(key)
+    return out
+
+
 def loads(data: str | bytes, path: object, what: str = "JSON") -> Any:
-    """Parse JSON text; NaN, Infinity, overflowing or over-long numbers, deep nesting, bad UTF-8
-    and syntax errors become one VtsError naming path."""
+    """Parse JSON text; NaN, Infinity, overflowing or over-long numbers, a key repeated in one
+    object, deep nesting, bad UTF-8 and syntax errors become one VtsError naming path."""
     try:
         text = data.decode("utf-8") if isinstance(data, bytes) else data
-        return json.loads(text, parse_constant=_no_constant, parse_float=_finite_float)
+        return json.loads(text, parse_constant=_no_constant, parse_float=_finite_float,
+                          object_pairs_hook=_unique_keys)
     except UnicodeDecodeError as e:
         raise VtsError(f"{what} is not UTF-8 text ({e.reason})", path) from None
     except json.JSONDecodeError as e:
@@ -46,7 +61,8 @@ def loads(data: str | bytes, path: object, what: str = "JSON") -> Any:
                        path) from None
     except RecursionError:
         raise VtsError(f"invalid {what}: nested too deeply", path) from None
-    except ValueError as e:  # NaN/Infinity, 1e999, or an integer over Python's digit limit
+    except ValueError as e:  # NaN/Infinity, 1e999, an integer over Python's digit limit, a
+        # repeated key
         reason = str(e).splitlines()[0][:100]
         raise VtsError(f"invalid {what}: {reason}", path) from None
 

@@ -16,8 +16,9 @@ import importlib
 import importlib.util
 import json
 import math
+import os
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -83,7 +84,11 @@ def _from_file(path: Path) -> Any:
     if not path.is_file():
         raise VtsError("recipe file not found", path)
     mod_name = f"vtsbench_recipe_{path.stem}_{abs(hash(str(path.resolve()))) & 0xFFFFFFFF:x}"
-    spec = importlib.util.spec_from_file_location(mod_name, path)
+    from importlib.machinery import SourceFileLoader
+
+    # the loader named: a recipe file without the .py suffix (./flow) is Python source too
+    spec = importlib.util.spec_from_file_location(mod_name, path,
+                                                  loader=SourceFileLoader(mod_name, str(path)))
     if spec is None or spec.loader is None:
         raise VtsError("cannot import the recipe file", path)
     module = importlib.util.module_from_spec(spec)
@@ -121,10 +126,27 @@ def _needs(e: ModuleNotFoundError) -> str:
     return f"the recipe needs the Python package {e.name!r}, which is not installed{extra}"
 
 
+def guarded(fn: Callable[..., Any], where: str) -> Callable[..., Any]:
+    """FN, with a package it imports only when called (a recipe's torch, transformers) that is
+    not installed made one line naming WHERE and the install command."""
+    def call(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except ModuleNotFoundError as e:
+            raise VtsError(_needs(e), where) from None
+
+    return call
+
+
 def load_recipe(name_or_path: str | Path) -> Any:
-    """A recipe from a .py file defining RECIPE, or by its registered name."""
+    """A recipe from a .py file defining RECIPE, or by its registered name.
+
+    A registered or built-in name always means that recipe, even when a file of that name is in
+    the working folder; a file is given by a name ending in .py or a path with a folder
+    (./flow); any other existing file is read as a recipe file too."""
     text = str(name_or_path)
-    if text.endswith(".py") or "/" in text or Path(text).is_file():
+    if text.endswith(".py") or "/" in text or (os.sep in text) or (
+            os.altsep is not None and os.altsep in text):
         return _from_file(Path(text))
     eps = registered()
     if text in eps:
@@ -133,17 +155,20 @@ def load_recipe(name_or_path: str | Path) -> Any:
         except ModuleNotFoundError as e:
             if not eps[text].module.startswith(e.name or "\0"):  # else stale metadata: below
                 raise VtsError(_needs(e), f"recipe {text}") from None
-    try:
-        module = importlib.import_module(f"vtsbench.recipes_builtin.{text}")
-    except ModuleNotFoundError as e:
-        if e.name and not e.name.startswith("vtsbench.recipes_builtin"):
-            raise VtsError(_needs(e), f"recipe {text}") from None
-        module = None
+    module = None
+    if text.isidentifier():  # a module name: not "", ".x" or "a-b"
+        try:
+            module = importlib.import_module(f"vtsbench.recipes_builtin.{text}")
+        except ModuleNotFoundError as e:
+            if e.name and not e.name.startswith("vtsbench.recipes_builtin"):
+                raise VtsError(_needs(e), f"recipe {text}") from None
     if module is not None and hasattr(module, "RECIPE"):
         return _check(module.RECIPE, f"vtsbench.recipes_builtin.{text}")
-    path = _builtin_file(text)
+    path = _builtin_file(text) if text.isidentifier() else None
     if path is not None:
         return _from_file(path)
+    if text and Path(text).is_file():
+        return _from_file(Path(text))
     known = ", ".join(sorted(eps)) or "none"
     raise VtsError(f"unknown recipe {text!r} (registered: {known}; or give a path to a .py file)")
 
@@ -179,6 +204,38 @@ def check_checkpoint(path: str | Path) -> Path:
     except Exception as e:  # safetensors' own error type for damaged data
         raise VtsError(f"corrupt checkpoint ({str(e).splitlines()[0][:100]})", path) from None
     return path
+
+
+def checkpoint_meta(path: str | Path, recipe: str, json_keys: Sequence[str] = ()
+                    ) -> dict[str, Any]:
+    """The metadata of a safetensors checkpoint that RECIPE wrote (only its header is read),
+    with JSON_KEYS parsed; any other file (a CSV, another recipe's checkpoint, a damaged
+    header) is a one-line VtsError naming it, whatever its suffix."""
+    from .jsonio import loads, regular_file
+
+    path = regular_file(path, "checkpoint", 1 << 40)
+    not_one = VtsError(f"not a {recipe} recipe checkpoint (a safetensors file written by "
+                       f"`vtsbench train {recipe}`)", path)
+    try:
+        with open(path, "rb") as fh:
+            n = int.from_bytes(fh.read(8), "little")
+            if not 2 <= n <= min(path.stat().st_size - 8, 100 << 20):
+                raise not_one
+            head = fh.read(n)
+    except OSError as e:
+        raise VtsError(f"cannot read checkpoint ({e.strerror or e})", path) from None
+    if head[:1] != b"{":
+        raise not_one
+    doc = loads(head, path, "checkpoint header")
+    meta = doc.get("__metadata__") if isinstance(doc, dict) else None
+    if not isinstance(meta, dict) or meta.get("recipe") != recipe:
+        raise not_one
+    out: dict[str, Any] = dict(meta)
+    for key in json_keys:
+        if not isinstance(meta.get(key), str):
+            raise VtsError(f"corrupt {recipe} checkpoint (no {key!r} in its metadata)", path)
+        out[key] = loads(meta[key], path, f"checkpoint metadata {key!r}")
+    return out
 
 
 def load_config(recipe: Any, path: str | Path | None) -> dict[str, Any]:

@@ -40,6 +40,7 @@ from .staging import (
     check_out,
     locked_stage,
     partial_path,
+    recover,
     remove_stale,
     shard_done,
     shard_tasks,
@@ -77,6 +78,7 @@ def build(recordings: str | Path, out: str | Path, opts: BuildOptions | None = N
     t0 = time.perf_counter()
     check_options(opts)
     root, out = Path(recordings).resolve(), Path(out).resolve()
+    recover(out)  # what a build killed in its final rename left: OUT's previous copy put back
     check_out(root, out, opts.overwrite)
     with ExitStack() as stack:
         # 1. workers: they start (and import) while this process reads the manifest, checks the

@@ -1,10 +1,10 @@
 """Finishing a build: zarr metadata, index and split files (while the shards are made), then
-info.json, the build report, the card and preview, checksums, and the rename to OUT."""
+info.json, the build report, the card and preview, checksums, and the rename to OUT (commit:
+the shard markers are kept until OUT holds the new dataset)."""
 
 from __future__ import annotations
 
 import json
-import shutil
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -14,7 +14,7 @@ from .options import BuildOptions
 from .plan import Plan
 from .provenance import package_version, sha256_file, versions
 from .shard import ShardTask
-from .staging import WORK
+from .staging import WORK, commit
 from .store import ARRAYS, KINDS, RGB_ONLY
 
 
@@ -101,7 +101,7 @@ def finish(stage: Path, out: Path, plan: Plan, splits: Any, split_sha: dict[str,
            opts: BuildOptions) -> dict[str, int]:
     """Write everything but the shards and the plan files, checksum it, and rename the stage
     to OUT."""
-    from ..atomic import replace_dir, write_bytes_atomic
+    from ..atomic import write_bytes_atomic
     from .card import write_card, write_preview
     from .schema import Calibration, Counts, DatasetInfo, ZarrSettings, dataset_checksum
 
@@ -138,6 +138,5 @@ def finish(stage: Path, out: Path, plan: Plan, splits: Any, split_sha: dict[str,
         if p.is_file() and not rel.startswith(f"{WORK}/"):
             top = rel.split("/")[0] if "/" in rel else "."
             sizes[top] = sizes.get(top, 0) + p.stat().st_size
-    shutil.rmtree(stage / WORK)
-    replace_dir(stage, out)  # --overwrite of a dataset (check_out): swapped, then deleted
+    commit(stage, out)  # --overwrite of a dataset (check_out): swapped, then deleted
     return dict(sorted(sizes.items()))

@@ -14,6 +14,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from ..errors import VtsError
+from ..jsonio import read_bytes
 from .schema import SampleMeta, SplitFile, schema_errors
 from .splits import SCHEMES, rng_for
 
@@ -22,13 +23,11 @@ GIVEN = "given_objects"
 MAX_FILE_BYTES = 64 << 20
 
 
-def _read_text(path: Path) -> str:
-    if not path.is_file():
-        raise VtsError("file not found", path)
-    if path.stat().st_size > MAX_FILE_BYTES:
-        raise VtsError(f"larger than {MAX_FILE_BYTES >> 20} MB: not a split or object list", path)
+def _read_text(path: Path, what: str) -> str:
+    """A small UTF-8 text file; a folder, a FIFO, a device or a missing file is refused for
+    what it is (one line)."""
     try:
-        return path.read_text(encoding="utf-8-sig")
+        return read_bytes(path, what, MAX_FILE_BYTES).decode("utf-8-sig")
     except UnicodeDecodeError as e:
         raise VtsError(f"not UTF-8 text ({e.reason})", path) from None
 
@@ -36,7 +35,7 @@ def _read_text(path: Path) -> str:
 def read_object_list(path: str | Path) -> list[str]:
     """Object names, one a line; blank lines and lines starting with '#' are skipped."""
     path = Path(path)
-    names = [ln.strip() for ln in _read_text(path).splitlines()]
+    names = [ln.strip() for ln in _read_text(path, "file of object names").splitlines()]
     names = [n for n in names if n and not n.startswith("#")]
     if not names:
         raise VtsError("lists no object (one object name a line)", path)
@@ -99,7 +98,7 @@ def given_objects_split(samples: Iterable[SampleMeta], held_out: Sequence[str], 
 def read_split_file(path: str | Path) -> SplitFile:
     """A split scheme in schemas/split.schema.json from a user's file; one-line errors."""
     path = Path(path)
-    text = _read_text(path)
+    text = _read_text(path, "split file")
     try:
         doc = json.loads(text, parse_constant=_no_constant)
     except json.JSONDecodeError as e:
@@ -111,6 +110,10 @@ def read_split_file(path: str | Path) -> SplitFile:
     if errs:
         more = f" (and {len(errs) - 1} more)" if len(errs) > 1 else ""
         raise VtsError(f"not a split file: {errs[0]}{more}", path)
+    empty = next((p for p, ids in doc["parts"].items() if not ids), None)
+    if empty is not None:  # trains or scores on nothing: refused now, not by a later train
+        raise VtsError(f"part {empty!r} lists no sample; remove the part or give it samples",
+                       path)
     sp = SplitFile.from_dict(doc)
     if sp.name in (*SCHEMES, GIVEN):
         raise VtsError(f"split name {sp.name!r} is a built-in scheme's; rename it", path)

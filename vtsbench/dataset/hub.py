@@ -16,6 +16,7 @@ carries the `huggingface` features metadata.
 
 from __future__ import annotations
 
+import contextlib
 import re
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -284,14 +285,78 @@ def _ordered(jobs: list[Any], make: Callable[[Any], Any], workers: int) -> Itera
             yield pending.popleft().result()
 
 
+def _fingerprint(ds: VtsDataset, schema: pa.Schema, opts: dict[str, Any], rows: tuple[int, int]
+                 ) -> str:
+    """sha256 of everything a kind's hub files depend on but their samples: the dataset's
+    content, the schema (labels, names, depth unit), the parquet options and rows, this
+    version of vtsbench. A finished file is kept by a rerun only when it still matches."""
+    import hashlib
+    import json
+
+    from .provenance import package_version
+
+    doc = {"dataset_sha256": ds.info.dataset_sha256, "vtsbench": package_version(),
+           "schema": hashlib.sha256(schema.serialize().to_pybytes()).hexdigest(),
+           "options": repr(sorted(opts.items())), "rows": list(rows)}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
+
+
+def _done(state: Path | None, rel: str) -> Path | None:
+    """The marker a finished hub file gets in the export's state folder."""
+    return None if state is None else state / "done" / (rel.replace("/", "~") + ".json")
+
+
+def _kept(root: Path, rel: str, marker: Path | None, fp: str) -> dict[str, Any] | None:
+    """The marker of a hub file finished by an earlier run with this fingerprint, when the file
+    is still there at its size; None otherwise."""
+    import json
+
+    if marker is None:
+        return None
+    try:
+        doc = json.loads(marker.read_text())
+        ok = (doc["fingerprint"] == fp and (root / rel).stat().st_size == doc["size"]
+              and isinstance(doc["sha256"], str))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return doc if ok else None
+
+
+def write_failed(e: OSError, path: Path) -> VtsError:
+    """One line naming the file being written, for a write that failed (a full disk: pyarrow
+    names no file and prints its own detail)."""
+    import errno as errnos
+    import os
+
+    code = e.errno
+    if code is None:  # pyarrow: "... Detail: [errno 28] No space left on device"
+        m = re.search(r"\[errno (\d+)\]", str(e), re.IGNORECASE)
+        code = int(m.group(1)) if m else None
+    reason = os.strerror(code) if code else (str(e).strip().splitlines() or ["write failed"])[0]
+    hint = "; the files finished so far are kept for a rerun" \
+        if code in (errnos.ENOSPC, errnos.EFBIG, errnos.EDQUOT) else ""
+    return VtsError(f"cannot write ({reason}){hint}", path)
+
+
 def write_kind(ds: VtsDataset, kind: str, root: Path, workers: int = 1,
-               advance: Callable[[int], None] | None = None) -> list[HubFile]:
+               advance: Callable[[int], None] | None = None, state: Path | None = None,
+               shown: Path | None = None, digests: dict[str, str] | None = None,
+               kept: list[str] | None = None) -> list[HubFile]:
     """Write the hub files of one kind under root/hf/<kind>/; returns them in cell order.
 
-    Each file is written through a temporary name and renamed when complete."""
+    Each file is written through a temporary name and renamed when complete; with a `state`
+    folder each finished file then gets a marker there (its fingerprint, size and sha256, which
+    go into `digests`), and a rerun keeps the files whose marker still matches (resume, listed
+    in `kept`). A
+    failed write removes its temporary file and names the file in one line (under `shown`, the
+    dataset, rather than root)."""
+    import hashlib
+    import json
+
     import pyarrow.parquet as pq
 
-    from ..atomic import TMP_SUFFIX
+    from ..atomic import TMP_SUFFIX, write_bytes_atomic
+    from .provenance import sha256_file
 
     folder = root / HUB_DIR / kind
     folder.mkdir(parents=True, exist_ok=True)
@@ -300,42 +365,77 @@ def write_kind(ds: VtsDataset, kind: str, root: Path, workers: int = 1,
     opts = _parquet_options(schema)
     group_rows = _rows_per(view, ROW_GROUP_BYTES, 0.6)
     file_rows = max(group_rows, _rows_per(view, FILE_BYTES, 0.6) // group_rows * group_rows)
+    base = _fingerprint(ds, schema, opts, (group_rows, file_rows))
     files: list[tuple[str, int, np.ndarray]] = []  # (path, cell, positions)
     for c, cell in enumerate(cells(ds, kind)):
         for f, start in enumerate(range(0, len(cell.positions), file_rows)):
             files.append((f"{HUB_DIR}/{kind}/{c:03d}-{f:03d}.parquet", c,
                           cell.positions[start:start + file_rows]))
-    jobs = [(k, pos[g:g + group_rows]) for k, (_, _, pos) in enumerate(files)
+    fps = [hashlib.sha256(f"{base} {rel} ".encode() + pos.astype("<i8").tobytes()).hexdigest()
+           for rel, _, pos in files]
+    digests = {} if digests is None else digests
+    done: dict[int, HubFile] = {}
+    for k, (rel, c, pos) in enumerate(files):
+        doc = _kept(root, rel, _done(state, rel), fps[k])
+        if doc is not None:
+            done[k] = HubFile(rel, c, len(pos), doc["size"])
+            digests[rel] = doc["sha256"]
+            if kept is not None:
+                kept.append(rel)
+            if advance is not None:
+                advance(len(pos))
+    keep = {Path(files[k][0]).name for k in done}
+    for p in folder.iterdir():  # files of another plan or unfinished, temporaries of a kill
+        if p.is_file() and p.name not in keep:
+            p.unlink()
+    jobs = [(k, pos[g:g + group_rows]) for k, (_, _, pos) in enumerate(files) if k not in done
             for g in range(0, len(pos), group_rows)]
-    out: list[HubFile] = []
     writer: Any = None
     current = -1
+
+    def tmp_of(k: int) -> Path:
+        path = root / files[k][0]
+        return path.with_name(f".{path.name}{TMP_SUFFIX}")
 
     def close() -> None:
         if writer is not None:
             writer.close()
             rel, c, pos = files[current]
             path = root / rel
-            path.with_name(f".{path.name}{TMP_SUFFIX}").replace(path)
-            out.append(HubFile(rel, c, len(pos), path.stat().st_size))
+            tmp_of(current).replace(path)
+            size = path.stat().st_size
+            done[current] = HubFile(rel, c, len(pos), size)
+            digests[rel] = sha256_file(path)
+            marker = _done(state, rel)
+            if marker is not None:
+                marker.parent.mkdir(parents=True, exist_ok=True)
+                write_bytes_atomic(marker, json.dumps({"fingerprint": fps[current], "size": size,
+                                                       "sha256": digests[rel]}).encode())
 
     try:
         for k, table in _ordered(jobs, lambda job: (job[0], _batch(
                 _view_at(ds, kind, job[1]), schema)), workers):
-            if k != current:
-                close()
-                path = root / files[k][0]
-                writer, current = pq.ParquetWriter(
-                    path.with_name(f".{path.name}{TMP_SUFFIX}"), schema, **opts), k
-            writer.write_table(table, row_group_size=group_rows)
+            try:
+                if k != current:
+                    close()
+                    writer, current = None, k
+                    writer = pq.ParquetWriter(tmp_of(k), schema, **opts)
+                writer.write_table(table, row_group_size=group_rows)
+            except OSError as e:
+                raise write_failed(e, (shown or root) / files[current][0]) from None
             if advance is not None:
                 advance(table.num_rows)
-        close()
+        try:
+            close()
+        except OSError as e:
+            raise write_failed(e, (shown or root) / files[current][0]) from None
         writer = None
     finally:
         if writer is not None:
-            writer.close()
-    return out
+            with contextlib.suppress(OSError):
+                writer.close()
+            tmp_of(current).unlink(missing_ok=True)
+    return [done[k] for k in sorted(done)]
 
 
 def _view_at(ds: VtsDataset, kind: str, positions: np.ndarray) -> View:
@@ -377,6 +477,47 @@ class ExportResult:
 
     layout: HubLayout
     seconds: float
+    kept: int = 0  # parquet files kept from an interrupted export
+
+
+#: The export's state folder inside its stage: a marker per finished parquet file.
+EXPORT_WORK = ".export"
+
+
+def export_stage(root: Path) -> Path:
+    """The hidden folder beside a dataset where export-hf makes its next version:
+    `.DATASET.hf.partial`."""
+    return root.with_name(f".{root.name}.hf.partial")
+
+
+def _link_dataset(root: Path, stage: Path) -> None:
+    """Make the stage the dataset without its hub copy, card and info.json: every other file
+    hard-linked (copied where the filesystem has no links), so no data is copied; the stage's
+    own hub files and state are kept for the resume."""
+    import os
+    import shutil
+
+    for p in stage.iterdir():
+        if p.name not in (HUB_DIR, EXPORT_WORK):
+            shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
+    for dirpath, dirnames, filenames in os.walk(root):
+        here = Path(dirpath)
+        rel_dir = here.relative_to(root)
+        if rel_dir == Path("."):
+            dirnames[:] = [d for d in dirnames if d != HUB_DIR]
+        (stage / rel_dir).mkdir(parents=True, exist_ok=True)
+        for name in [*filenames, *(d for d in dirnames if (here / d).is_symlink())]:
+            src, dst = here / name, stage / rel_dir / name
+            if (rel_dir / name).as_posix() in ("README.md", INFO_PATH):
+                continue
+            if src.is_symlink():
+                os.symlink(os.readlink(src), dst)
+                continue
+            try:
+                os.link(src, dst)
+            except OSError:
+                shutil.copy2(src, dst)
+        dirnames[:] = [d for d in dirnames if not (here / d).is_symlink()]
 
 
 def export_hf(dataset: str | Path, *, workers: int = 1, license: str = "unknown",
@@ -384,10 +525,14 @@ def export_hf(dataset: str | Path, *, workers: int = 1, license: str = "unknown"
     """Write the hub copy of a built dataset into it (hf/, a new README.md) and record the new
     files in meta/info.json, so `vtsbench verify` still checks every file.
 
-    The parquet files are written first (each through a temporary name), then the card, then
-    info.json last: an interrupted export leaves files info.json does not list (verify says
-    so) and is simply run again.
+    The dataset is never half exported: its next version is made beside it, in
+    `.DATASET.hf.partial` (its files hard-linked, the parquet files written there one by one,
+    each through a temporary name and marked done, then the card and info.json), and swapped
+    in as a whole by the same rename as `build --overwrite` (staging.commit). At every kill
+    point DATASET is the previous complete dataset or the new one, and a rerun keeps the
+    parquet files already finished (those whose dataset and schema have not changed).
     """
+    import os
     import shutil
     import time
 
@@ -395,32 +540,47 @@ def export_hf(dataset: str | Path, *, workers: int = 1, license: str = "unknown"
     from .card import write_hub_card
     from .finish import hash_files
     from .loader import load
+    from .staging import commit, locked_stage, recover
 
     t0 = time.perf_counter()
     if not re.fullmatch(r"[a-z0-9][a-z0-9.+-]{0,63}", license):
         raise VtsError(f"license must be a Hub license id (lower case, e.g. cc-by-4.0, mit, "
                        f"other), got {license!r}")
-    root = Path(dataset)
-    ds = load(root)
+    given = Path(dataset)
+    root = given.resolve()
+    recover(root, export_stage(root), EXPORT_WORK)  # a killed export or build: put right
+    ds = load(given)
     if ds.loc.remote:
-        raise VtsError("export-hf writes into the dataset: give a local folder", root)
-    shutil.rmtree(root / HUB_DIR, ignore_errors=True)
-    files: dict[str, list[HubFile]] = {}
-    total = sum(len(ds.view(k)) for k in KINDS)
-    with _progress(progress, total) as advance:
-        for kind in KINDS:
-            if len(ds.view(kind)):
-                files[kind] = write_kind(ds, kind, root, workers, advance)
-    configs, kinds = hub_configs(ds, files)
-    layout = HubLayout(files, configs, kinds)
-    write_hub_card(root, ds, layout, license)
-    info = ds.info
-    keep = {k: v for k, v in info.files.items()
-            if not k.startswith(f"{HUB_DIR}/") and k != "README.md"}
-    new = hash_files(root, lambda rel: rel.startswith(f"{HUB_DIR}/") or rel == "README.md")
-    info.files = dict(sorted({**keep, **new}.items()))
-    write_bytes_atomic(root / INFO_PATH, info.to_json().encode())
-    return ExportResult(layout, time.perf_counter() - t0)
+        raise VtsError("export-hf writes into the dataset: give a local folder", given)
+    if not os.access(root.parent, os.W_OK):
+        raise VtsError(f"export-hf makes the new version beside the dataset (in "
+                       f"{export_stage(root).name}), and this folder is not writable",
+                       root.parent)
+    with locked_stage(root, export_stage(root), EXPORT_WORK) as stage:
+        _link_dataset(root, stage)
+        files: dict[str, list[HubFile]] = {}
+        digests: dict[str, str] = {}
+        kept: list[str] = []
+        total = sum(len(ds.view(k)) for k in KINDS)
+        with _progress(progress, total) as advance:
+            for kind in KINDS:
+                if len(ds.view(kind)):
+                    files[kind] = write_kind(ds, kind, stage, workers, advance,
+                                             stage / EXPORT_WORK, given, digests, kept)
+                else:
+                    shutil.rmtree(stage / HUB_DIR / kind, ignore_errors=True)
+        configs, kinds = hub_configs(ds, files)
+        layout = HubLayout(files, configs, kinds)
+        write_hub_card(stage, ds, layout, license)
+        info = ds.info
+        keep = {k: v for k, v in info.files.items()
+                if not k.startswith(f"{HUB_DIR}/") and k != "README.md"}
+        new = hash_files(stage, lambda rel: rel.startswith(f"{HUB_DIR}/") or rel == "README.md",
+                         digests)
+        info.files = dict(sorted({**keep, **new}.items()))
+        write_bytes_atomic(stage / INFO_PATH, info.to_json().encode())
+        commit(stage, root, EXPORT_WORK)
+    return ExportResult(layout, time.perf_counter() - t0, len(kept))
 
 
 class _progress:

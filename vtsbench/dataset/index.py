@@ -78,8 +78,9 @@ def read_index(path: Path, kind: str) -> list[SampleMeta]:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    if not path.is_file():
-        raise VtsError("index not found", path)
+    from ..jsonio import regular_file
+
+    regular_file(path, "index")  # a folder, a FIFO or a device is said as such
     try:
         table = pq.read_table(path)
     except (pa.ArrowException, OSError) as e:

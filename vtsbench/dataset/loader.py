@@ -8,8 +8,8 @@ workers need, and reading one split or one object touches only those samples' ch
 
 from __future__ import annotations
 
+import functools
 import os
-import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -19,9 +19,10 @@ import zarr
 from zarr.storage import WrapperStore
 
 from ..errors import VtsError
-from . import store
+from . import store, validate
 from .arrays import ITER_BYTES, check_arrays
-from .schema import INFO_PATH, KINDS, DatasetInfo, SplitFile, index_schema_of, load_info
+from .location import Location
+from .schema import INFO_PATH, KINDS, DatasetInfo, SplitFile, load_info
 from .splits import read_split
 
 if TYPE_CHECKING:
@@ -34,56 +35,6 @@ ARRAYS = store.ARRAYS
 
 class SampleIndexError(VtsError, IndexError):
     """A position outside a view: a one-line VtsError that is also an IndexError."""
-
-
-class Location:
-    """Where a dataset lives (a folder or an fsspec URL) and how to read one of its files."""
-
-    def __init__(self, root: str | os.PathLike, storage_options: Mapping[str, Any] | None = None):
-        self.url = str(root).rstrip("/") or "/"
-        self.remote = "://" in self.url
-        self.storage_options = dict(storage_options or {})
-
-    def path(self, rel: str) -> str:
-        """The location of a file of the dataset (relative path with '/')."""
-        return f"{self.url}/{rel}"
-
-    def read_bytes(self, rel: str, missing: str = "not found") -> bytes:
-        """A whole file of the dataset; missing or unreadable is a one-line VtsError."""
-        where = self.path(rel)
-        try:
-            if not self.remote:
-                return Path(where).read_bytes()
-            import fsspec
-
-            fs, path = fsspec.core.url_to_fs(where, **self.storage_options)
-            return fs.cat_file(path)
-        except FileNotFoundError:
-            raise VtsError(missing, where) from None
-        except Exception as e:  # network and permission errors of any fsspec backend
-            msg = str(e).strip().splitlines()[0] if str(e).strip() else ""
-            raise VtsError(f"cannot read ({type(e).__name__}{': ' + msg if msg else ''})",
-                           where) from None
-
-    def checked(self, rel: str, read: Any, *args: Any) -> Any:
-        """Run a reader of local files (read(path, *args)) on one file of the dataset.
-
-        A remote file is copied into a temporary folder first; errors name the URL.
-        """
-        if not self.remote:
-            return read(Path(self.path(rel)), *args)
-        with tempfile.TemporaryDirectory(prefix="vtsbench-") as tmp:
-            local = Path(tmp) / rel
-            local.parent.mkdir(parents=True, exist_ok=True)
-            local.write_bytes(self.read_bytes(rel, "not found (not a vtsbench dataset?)"
-                                              if rel == INFO_PATH else "not found"))
-            try:
-                return read(local, *args)
-            except VtsError as e:
-                text = str(e)
-                if e.path and text.startswith(f"{e.path}: "):
-                    text = text[len(e.path) + 2:]
-                raise VtsError(text, self.path(rel)) from None
 
 
 class StrictStore(WrapperStore):
@@ -121,6 +72,7 @@ class KindStore:
     def __init__(self, loc: Location, kind: str, info: DatasetInfo, table: pa.Table) -> None:
         self.loc, self.kind, self.info, self.table = loc, kind, info, table
         self.rows = table.column("row").to_numpy().astype(np.int64)
+        self.metadata_checked = False
         self._reset()
 
     def _reset(self) -> None:
@@ -131,7 +83,7 @@ class KindStore:
         self._pos_of: dict[str, int] | None = None
 
     def __getstate__(self) -> dict[str, Any]:
-        keep = ("loc", "kind", "info", "table", "rows")
+        keep = ("loc", "kind", "info", "table", "rows", "metadata_checked")
         return {k: self.__dict__[k] for k in keep}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -158,6 +110,9 @@ class KindStore:
         if name not in self._arrays:
             if self._group is None:
                 group = store.open_group(self.loc.url, self.kind, self.loc.storage_options)
+                if not self.metadata_checked:
+                    self._agrees()
+                    self.metadata_checked = True
                 strict = StrictStore(group.store, store.group_location(self.loc.url, self.kind))
                 self._group = zarr.open_group(strict, mode="r", use_consolidated=True)
             try:
@@ -166,26 +121,26 @@ class KindStore:
                 raise VtsError(f"cannot open the array ({type(e).__name__}); run `vtsbench "
                                "verify`", f"{store.group_location(self.loc.url, self.kind)}/"
                                f"{name}") from None
-            self._agrees(name, arr)
             self._arrays[name] = arr
         return self._arrays[name]
 
-    def _agrees(self, name: str, arr: Any) -> None:
-        """Refuse an array whose shape, dtype or depth scale contradicts info.json (metadata
-        changed after the build would otherwise read as wrong numbers)."""
-        where = f"{store.group_location(self.loc.url, self.kind)}/{name}"
-        want = tuple(self.info.shapes.get(self.kind, {}).get(name, ()))
-        if tuple(arr.shape) != want:
-            raise VtsError(f"shape {tuple(arr.shape)} contradicts info.json ({want}); run "
-                           "`vtsbench verify`", where)
-        if str(arr.dtype) != store.DTYPES[name]:
-            raise VtsError(f"dtype {arr.dtype} contradicts the format ({store.DTYPES[name]})",
-                           where)
-        # format 1.1 writes the CF scale_factor, 1.0 wrote scale
-        scale = arr.attrs.get("scale_factor", arr.attrs.get("scale")) if name == "depth" else None
-        if scale is not None and scale != self.info.depth_scale_mm:
-            raise VtsError(f"depth scale {scale} mm contradicts info.json depth_scale_mm "
-                           f"{self.info.depth_scale_mm}; run `vtsbench verify`", where)
+    def _agrees(self) -> None:
+        """Refuse Zarr metadata that contradicts info.json or itself (`validate.zarr_problems`,
+        as verify): metadata changed after the build would otherwise read as wrong numbers."""
+        from ..jsonio import loads
+
+        base = f"data/{self.kind}.zarr"
+
+        def doc(rel: str) -> Any:
+            return loads(self.loc.read_bytes(rel), self.loc.path(rel), "Zarr metadata")
+
+        group = doc(f"{base}/zarr.json")
+        arrays = {n: doc(f"{base}/{n}/zarr.json") for n in self.info.arrays}
+        bad = validate.zarr_problems(self.info, self.kind, group, arrays)
+        if bad:
+            more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
+            raise VtsError(f"{bad[0]}{more}; run `vtsbench verify`",
+                           store.group_location(self.loc.url, self.kind))
 
     def _decode_error(self, name: str, runs: list[tuple[int, int]], err: Exception) -> VtsError:
         """The error of a chunk that does not decode, naming the shard file and the sample."""
@@ -497,10 +452,14 @@ def _dtype(name: str) -> np.dtype:
 
 
 class VtsDataset:
-    """A loaded dataset: info, the static and slip views, and its split files."""
+    """A loaded dataset: info, the static and slip views, and its split files.
 
-    def __init__(self, loc: Location, info: DatasetInfo, tables: Mapping[str, pa.Table]) -> None:
-        self.loc, self.info = loc, info
+    allow_leaks=True uses a split whose parts share samples or values their disjoint rules
+    keep apart (refused by default, as `vtsbench verify` reports it)."""
+
+    def __init__(self, loc: Location, info: DatasetInfo, tables: Mapping[str, pa.Table],
+                 allow_leaks: bool = False) -> None:
+        self.loc, self.info, self.allow_leaks = loc, info, allow_leaks
         self._kinds = {k: KindStore(loc, k, info, tables[k]) for k in KINDS}
         self._splits: dict[str, SplitFile] = {}
 
@@ -540,12 +499,29 @@ class VtsDataset:
         return sorted(self.info.splits)
 
     def split_file(self, name: str) -> SplitFile:
-        """A split file, read once and checked against its sha256 in info.json."""
+        """A split file, read once and checked as verify checks it (`validate.split_problems`):
+        its sha256 in info.json, its size and id count against the index, ids known, part sizes,
+        and no leak between parts unless the dataset was loaded with allow_leaks=True."""
         if name not in self.info.splits:
-            raise VtsError(f"unknown split {name!r}; splits: {', '.join(self.splits) or 'none'}")
+            raise VtsError(f"unknown split {_short(name)!r}; splits: "
+                           f"{', '.join(self.splits) or 'none'}")
         if name not in self._splits:
-            self._splits[name] = self.loc.checked(f"meta/splits/{name}.json", read_split,
-                                                  self.info.splits[name])
+            rel = f"meta/splits/{name}.json"
+            max_bytes, max_ids = validate.split_limits(sum(len(k.rows)
+                                                           for k in self._kinds.values()))
+            split = self.loc.checked(rel, functools.partial(
+                read_split, expected_sha256=self.info.splits[name], max_bytes=max_bytes,
+                max_ids=max_ids))
+            tables = {k: ks.table for k, ks in self._kinds.items()}
+            bad, leaks = validate.split_problems(split, name, self.info, tables)
+            if leaks and not self.allow_leaks:
+                bad.append(f"leak: {leaks[0]}" + (f" (and {len(leaks) - 1} more)"
+                                                  if len(leaks) > 1 else "")
+                           + "; vtsbench.load(..., allow_leaks=True) uses it anyway")
+            if bad:
+                more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
+                raise VtsError(f"{bad[0]}{more}", self.loc.path(rel))
+            self._splits[name] = split
         return self._splits[name]
 
     def parts(self, name: str) -> list[str]:
@@ -557,14 +533,19 @@ class VtsDataset:
         if part not in split.parts:
             raise VtsError(f"split {split.name!r} has no part {part!r}; parts: "
                            f"{', '.join(sorted(split.parts, key=_part_key))}")
-        ks = self._kinds[split.kind]
-        pos = [ks.position(i) for i in split.parts[part]]
-        missing = [i for i, p in zip(split.parts[part], pos, strict=True) if p is None]
-        if missing:
+        import pyarrow as pa
+        import pyarrow.compute as pc
+
+        ids = pa.array(split.parts[part], pa.string())
+        index = self._kinds[split.kind].table.column("sample_id").combine_chunks()
+        pos = np.asarray(pc.fill_null(pc.index_in(ids, value_set=index), -1), np.int64)
+        missing = ids.filter(pa.array(pos < 0))
+        if len(missing):
             raise VtsError(f"split {split.name!r} part {part!r}: {len(missing)} sample id(s) "
-                           f"not in index/{split.kind}.parquet (first {missing[0]!r})",
+                           f"not in index/{split.kind}.parquet (first "
+                           f"{_short(missing[0].as_py())!r})",
                            self.loc.path(f"meta/splits/{split.name}.json"))
-        return np.sort(np.asarray(pos, dtype=np.int64))
+        return np.sort(pos)
 
     def split(self, name: str, part: str) -> View:
         """The samples of one part of a split, from the kind the split is made of."""
@@ -580,43 +561,56 @@ class VtsDataset:
 
 
 def _read_index(loc: Location, kind: str, info: DatasetInfo) -> pa.Table:
-    """index/<kind>.parquet as a Table, checked like index.read_index (the kind's schema) and
-    against the arrays (rows 0..N-1); read whole through fsspec for URLs."""
+    """index/<kind>.parquet as a Table, checked as verify checks it (`validate.index_problems`:
+    schema, rows 0..N-1 in order, objects and class_idx, values); read whole for URLs."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
+    from ..jsonio import regular_file
+
     rel = f"index/{kind}.parquet"
+    if not loc.remote:
+        regular_file(loc.path(rel), "index")  # a folder, a FIFO or a device is said as such
     try:
         if loc.remote:
-            table = pq.read_table(pa.BufferReader(loc.read_bytes(rel)))
+            table = pq.read_table(pa.BufferReader(loc.read_bytes(rel, "index not found")))
         else:
             table = pq.read_table(loc.path(rel))
     except FileNotFoundError:
         raise VtsError("index not found", loc.path(rel)) from None
     except pa.ArrowException as e:
         raise VtsError(f"not a readable parquet file ({e})", loc.path(rel)) from None
-    if index_schema_of(table.schema, kind) is None:
-        have = ", ".join(f"{f.name}: {f.type}" for f in table.schema)
-        raise VtsError(f"columns differ from the {kind} index schema (found {have})",
-                       loc.path(rel))
-    n = info.shapes.get(kind, {}).get("rgb", (0,))[0]
-    rows = np.sort(table.column("row").to_numpy())
-    if len(rows) != n or not np.array_equal(rows, np.arange(n)):
-        raise VtsError(f"index rows do not match the {n} samples of data/{kind}.zarr",
-                       loc.path(rel))
+    bad = validate.index_problems(table, kind, info)
+    if bad:
+        more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
+        raise VtsError(f"{bad[0]}{more}", loc.path(rel))
     return table
 
 
+def _short(text: str, n: int = 80) -> str:
+    return text if len(text) <= n else text[:n] + "..."
+
+
 def load(path_or_url: str | os.PathLike, *,
-         storage_options: Mapping[str, Any] | None = None) -> VtsDataset:
+         storage_options: Mapping[str, Any] | None = None,
+         allow_leaks: bool = False) -> VtsDataset:
     """Open a vtsbench dataset from a folder or an fsspec URL (http://, s3://, memory://, ...).
 
-    Reads meta/info.json (refusing an unknown format major version) and the two indexes; the
-    arrays are opened on first read. storage_options go to fsspec for URLs.
+    Reads meta/info.json (refusing an unknown format major version) and the two indexes, and
+    checks them as `vtsbench verify` does (vtsbench.dataset.validate); split files are checked
+    when first used, the Zarr metadata on the first read. A split that leaks (a sample in two
+    parts, or parts sharing an object, session or location their rules keep apart) is refused
+    unless allow_leaks=True. storage_options go to fsspec for URLs.
     """
     loc = Location(path_or_url, storage_options)
     if not loc.remote and not Path(loc.url).is_dir():
         raise VtsError("no such dataset folder", loc.url)
     info = loc.checked(INFO_PATH, load_info)
     tables = {k: _read_index(loc, k, info) for k in KINDS}
-    return VtsDataset(loc, info, tables)
+    bad = validate.ids_problems(tables)
+    if bad:
+        raise VtsError(bad[0], loc.path("index"))
+    bad = validate.counts_problems(info, tables)
+    if bad:
+        raise VtsError(bad[0], loc.path(INFO_PATH))
+    return VtsDataset(loc, info, tables, allow_leaks)

@@ -8,6 +8,7 @@ HF_TOKEN, as huggingface_hub reads it).
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,6 +17,22 @@ from .hub_layout import HUB_DIR
 
 #: Never uploaded: hidden files (partial writes, caches) and build leftovers.
 IGNORE = (".*", "**/.*", "**/*.tmp")
+#: One part of a Hub repository id (namespace or name), as the Hub accepts it: letters, digits,
+#: '.', '_', '-', neither starting nor ending with '.' or '-', at most 96 characters.
+_REPO_PART = re.compile(r"[A-Za-z0-9_](?:[A-Za-z0-9._-]{0,94}[A-Za-z0-9_])?")
+
+
+def check_repo_id(repo_id: str) -> str:
+    """A Hub dataset repository id, NAMESPACE/NAME, checked as the Hub checks it (no '..' nor
+    '--', no path of any other shape) before anything is read or sent: a one-line error."""
+    parts = repo_id.split("/")
+    bad = (len(parts) != 2 or not all(_REPO_PART.fullmatch(p) for p in parts)
+           or ".." in repo_id or "--" in repo_id or repo_id.endswith(".git"))
+    if bad:
+        raise VtsError(f"repository id {repo_id[:100]!r} is not NAMESPACE/NAME (letters, digits, "
+                       "'.', '_', '-', each part at most 96 characters, no '..' or '--', not "
+                       "starting or ending with '.' or '-'), e.g. my-lab/tactile")
+    return repo_id
 
 
 @dataclass
@@ -31,11 +48,14 @@ class PushPlan:
         return sum(n for _, n in self.files)
 
 
-def push_plan(dataset: str | Path, zarr: bool = True) -> PushPlan:
+def push_plan(dataset: str | Path, zarr: bool = True, repo_id: str | None = None) -> PushPlan:
     """What `push` uploads: every file of the verified dataset (without data/ when zarr=False,
-    which leaves a Hub repository that `datasets` reads but `vtsbench.load` cannot)."""
+    which leaves a Hub repository that `datasets` reads but `vtsbench.load` cannot); repo_id,
+    when given, is checked first."""
     from .verify import verify
 
+    if repo_id is not None:
+        check_repo_id(repo_id)
     root = Path(dataset)
     report = verify(root, decode=False)
     if not report.ok:
@@ -60,7 +80,7 @@ def push(dataset: str | Path, repo_id: str, *, zarr: bool = True, private: bool 
     """Create the dataset repository if needed and upload the folder; returns the commit URL."""
     from huggingface_hub import HfApi
 
-    plan = push_plan(dataset, zarr)
+    plan = push_plan(dataset, zarr, repo_id)
     api = HfApi()
     try:
         api.create_repo(repo_id, repo_type="dataset", private=private, exist_ok=True)

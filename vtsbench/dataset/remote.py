@@ -3,7 +3,8 @@
 
 A path or a file:// URL is used in place. For any other URL, `info` reads info.json and the
 indexes and asks the file system for sizes (no array data), and `verify`, which reads every
-byte anyway, checks a temporary copy of info.json and of every file it lists.
+byte anyway, checks a temporary copy of info.json and of every file it lists. Every read goes
+through dataset.location (timeouts, size limits, paths that stay inside the copy).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import VtsError
-from .loader import Location
+from .location import Location, filesystem, safe_rel
 from .schema import INFO_PATH, DatasetInfo, load_info
 
 #: Files fetched at once from a remote dataset.
@@ -28,13 +29,9 @@ def local_path(location: str | os.PathLike) -> Path | None:
     text = str(location)
     if "://" not in text:
         return Path(text)
-    import fsspec
     from fsspec.implementations.local import LocalFileSystem
 
-    try:
-        fs, path = fsspec.core.url_to_fs(text)
-    except (ValueError, ImportError) as e:  # an unknown protocol, a backend not installed
-        raise VtsError(f"cannot open this URL ({e})", text) from None
+    fs, path = filesystem(text)
     return Path(path) if isinstance(fs, LocalFileSystem) else None
 
 
@@ -45,41 +42,39 @@ def remote_info(loc: Location) -> DatasetInfo:
 
 def remote_sizes(loc: Location, info: DatasetInfo) -> dict[str, int]:
     """Size of info.json and of every file it lists (relative path -> bytes)."""
-    import fsspec
-
     rels = [INFO_PATH, *sorted(info.files)]
-    fs, _ = fsspec.core.url_to_fs(loc.url, **loc.storage_options)
-    try:
-        sizes = fs.sizes([fsspec.core.url_to_fs(loc.path(r), **loc.storage_options)[1]
-                          for r in rels])
-    except Exception as e:  # network and permission errors of any fsspec backend
-        raise VtsError(f"cannot list the dataset's files ({type(e).__name__})", loc.url) from None
-    return {r: int(s or 0) for r, s in zip(rels, sizes, strict=True)}
+    return dict(zip(rels, loc.sizes(rels), strict=True))
 
 
 @contextlib.contextmanager
 def local_copy(location: str | os.PathLike,
                storage_options: Mapping[str, Any] | None = None) -> Iterator[Path]:
     """A local folder holding the dataset: the folder itself for a path or file:// URL, else a
-    temporary copy of info.json and every file it lists (removed on leaving)."""
+    temporary copy of info.json and every file it lists (removed on leaving). A listed path
+    that would leave the copy's folder is refused before anything is fetched."""
     path = local_path(location)
     if path is not None:
         yield path
         return
     from concurrent.futures import ThreadPoolExecutor
 
-    from ..atomic import write_bytes_atomic
-
     loc = Location(location, storage_options)
     info = remote_info(loc)
+    rels = [INFO_PATH, *sorted(info.files)]
+    for rel in rels:
+        loc.path(rel)  # no '..', absolute path, backslash...: refused naming info.json
     with tempfile.TemporaryDirectory(prefix="vtsbench-") as tmp:
         root = Path(tmp) / "dataset"
+        inside = root.resolve()
 
         def fetch(rel: str) -> None:
-            dest = root / rel
+            dest = root / safe_rel(rel, loc.path(INFO_PATH))
+            if not dest.resolve().is_relative_to(inside):  # and where it resolves, links too
+                raise VtsError(f"file path {rel[:120]!r} leaves the dataset folder; refused",
+                               loc.path(INFO_PATH))
             dest.parent.mkdir(parents=True, exist_ok=True)
-            write_bytes_atomic(dest, loc.read_bytes(rel))
+            loc.copy(rel, dest)
 
         with ThreadPoolExecutor(FETCH_THREADS) as pool:
-            list(pool.map(fetch, [INFO_PATH, *sorted(info.files)]))
+            list(pool.map(fetch, rels))
         yield root

@@ -526,6 +526,34 @@ def consistency_problems(info: DatasetInfo) -> list[str]:
     return out
 
 
+#: A split name: the split schema's `name` (it is also the file name under meta/splits/).
+SPLIT_NAME = re.compile(r"[a-z0-9][a-z0-9_]{0,63}")
+
+
+def _shown(values: Iterable[str], n: int = 3) -> str:
+    vs = list(values)
+    return ", ".join(repr(v if len(v) <= 60 else v[:60] + "...") for v in vs[:n]) + (
+        ", ..." if len(vs) > n else "")
+
+
+def info_problems(info: DatasetInfo) -> list[str]:
+    """Where info.json names what it may not: a split that is no plain name (its file would be
+    read from elsewhere), a file outside the dataset, counts of splits it does not list."""
+    out = []
+    bad = [n for n in info.splits if not SPLIT_NAME.fullmatch(n)]
+    if bad:
+        out.append(f"splits: {len(bad)} name(s) that are not plain split names (a-z, 0-9 and _, "
+                   f"at most 64): {_shown(bad)}")
+    paths = [p for p in info.files
+             if p.startswith("/") or any(s in ("", ".", "..") for s in p.split("/"))]
+    if paths:
+        out.append(f"files: {len(paths)} path(s) outside the dataset folder: {_shown(paths)}")
+    if set(info.counts.splits) != set(info.splits):
+        out.append(f"counts.splits names {_shown(sorted(info.counts.splits))}, splits "
+                   f"{_shown(sorted(info.splits))}")
+    return out
+
+
 def dataset_checksum(files: Mapping[str, str]) -> str:
     """dataset_sha256: sha256 of the lines `path sha256\\n`, sorted by path, of every file under
     data/, index/ and meta/splits/ (UTF-8)."""
@@ -552,9 +580,10 @@ def info_schema_errors(doc: Any) -> list[str]:
 def load_info(path: str | Path) -> DatasetInfo:
     """Read and validate meta/info.json (given the file or the dataset folder)."""
     path = Path(path)
-    if path.is_dir():
+    if path.is_dir() and not path.as_posix().endswith(INFO_PATH):  # (info.json itself a
+        # folder is said so below)
         path = path / INFO_PATH
-    if not path.is_file():
+    if not path.exists() and not path.is_symlink():
         raise VtsError("not found (not a vtsbench dataset?)", path)
     from ..jsonio import loads, read_bytes
 
@@ -580,7 +609,7 @@ def load_info(path: str | Path) -> DatasetInfo:
     if problem:
         raise VtsError(problem, path)
     info = DatasetInfo.from_dict(doc)
-    bad = consistency_problems(info)
+    bad = consistency_problems(info) + info_problems(info)
     if bad:
         more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
         raise VtsError(f"{bad[0]}{more}", path)

@@ -443,23 +443,36 @@ def write_splits(folder: str | Path, splits: Iterable[SplitFile]) -> dict[str, s
     return out
 
 
-def read_split(path: str | Path, expected_sha256: str | None = None) -> SplitFile:
-    """Read and validate a split file; a checksum other than expected_sha256 is an error."""
-    path = Path(path)
-    if not path.is_file():
-        raise VtsError("split file not found", path)
-    from ..jsonio import read_bytes
+def read_split(path: str | Path, expected_sha256: str | None = None, *,
+               max_bytes: int = 256 << 20, max_ids: int | None = None) -> SplitFile:
+    """Read and validate a split file; a checksum other than expected_sha256 is an error, and
+    so is a file over max_bytes or listing more than max_ids ids (`validate.split_limits`: a
+    split lists each sample of its dataset at most once), refused before any id is looked at."""
+    import os
 
-    data = read_bytes(path, "split file", 256 << 20)
+    from ..jsonio import loads, read_bytes, regular_file
+
+    path = Path(path)
+    if not os.path.lexists(path):
+        raise VtsError("split file not found", path)
+    size = regular_file(path, "split file").stat().st_size
+    if size > max_bytes:
+        raise VtsError(f"split file of {size} bytes, more than a split of this dataset can hold "
+                       f"({max_bytes} bytes)", path)
+    data = read_bytes(path, "split file", max_bytes)
     got = hashlib.sha256(data).hexdigest()
     if expected_sha256 is not None and got != expected_sha256:
         raise VtsError(f"sha256 mismatch: expected {expected_sha256}, found {got} "
                        "(the split file was changed after the build)", path)
-    from ..jsonio import loads
-
     doc = loads(data, path)
+    parts = doc.get("parts") if isinstance(doc, dict) else None
+    if max_ids is not None and isinstance(parts, dict):
+        n = sum(len(v) for v in parts.values() if isinstance(v, list))
+        if n > max_ids:
+            raise VtsError(f"lists {n} sample ids, more than the {max_ids} samples of the "
+                           "dataset (a split lists each sample at most once)", path)
     errs = schema_errors(doc, "split")
     if errs:
         more = f" (and {len(errs) - 1} more)" if len(errs) > 1 else ""
-        raise VtsError(f"{errs[0]}{more}", path)
+        raise VtsError(f"{errs[0][:200]}{more}", path)
     return SplitFile.from_dict(doc)

@@ -1,5 +1,6 @@
 """The partial folder a build writes into: its lock, the shard tasks with the fingerprint of
-everything their bytes depend on, which shards a rerun keeps (resume), and what it deletes."""
+everything their bytes depend on, which shards a rerun keeps (resume), what it deletes, and the
+final rename that keeps the resume state until OUT holds the new dataset (commit, recover)."""
 
 from __future__ import annotations
 
@@ -21,7 +22,8 @@ from .store import ARRAYS, KINDS
 
 #: Bumped whenever the bytes a shard task writes change for the same inputs.
 FINGERPRINT_VERSION = 2
-#: Build state inside the partial folder (markers, lock); removed before the final rename.
+#: Build state inside the partial folder (shard markers); parked beside it during the final
+#: rename (commit) and deleted once the rename has happened.
 WORK = ".build"
 
 
@@ -110,18 +112,26 @@ def partial_path(out: Path) -> Path:
 
 
 def lock_path(out: Path) -> Path:
-    """`.OUT.lock` beside OUT: the lock of every build writing OUT (an empty file, kept)."""
+    """`.OUT.lock` beside OUT: the lock of every build or export writing OUT (an empty file,
+    removed by its holder; one left by a killed process is taken over)."""
     return out.with_name(f".{out.name}.lock")
 
 
+#: The record commit leaves in the parked resume state: the sha256 of the stage's info.json.
+COMMIT = "commit.json"
+
+
 @contextmanager
-def locked_stage(out: Path) -> Iterator[Path]:
-    """Create or reuse the partial folder, holding a lock so two builds never share it."""
-    stage = partial_path(out)
+def locked_stage(out: Path, stage: Path | None = None, work: str = WORK,
+                 create: bool = True) -> Iterator[Path]:
+    """Create or reuse the partial folder (`.OUT.partial`, or `stage`) with its state folder
+    `work`, holding a lock so two builds never share it; what a killed run left beside OUT is
+    first put right (recover_stage). create=False: only that (see recover)."""
+    stage = stage or partial_path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     # The lock lives beside OUT, not in the partial folder: it is held from before the existence
     # check (build re-runs check_out under it) through the final rename, and a second build
-    # cannot take it while the first removes its build state and renames the folder. The holder
+    # cannot take it while the first parks its build state and renames the folder. The holder
     # removes the file before letting go; a build that locked a file already removed (opened
     # just before) sees that it is no longer the one at the path and stops.
     path = lock_path(out)
@@ -139,14 +149,82 @@ def locked_stage(out: Path) -> Iterator[Path]:
         except ImportError:  # no fcntl (Windows): no lock
             pass
         except OSError:
-            raise VtsError("another build is writing this dataset (its lock is held)",
-                           out) from None
-        (stage / WORK).mkdir(parents=True, exist_ok=True)
+            raise VtsError("another build or export is writing this dataset (its lock is "
+                           "held)", out) from None
+        recover_stage(out, stage, work)
+        if create:
+            (stage / work).mkdir(parents=True, exist_ok=True)
         yield stage
     finally:
         if held:
             path.unlink(missing_ok=True)
         fh.close()
+
+
+def parked_path(stage: Path, work: str = WORK) -> Path:
+    """Where commit parks the stage's state folder during the final rename: beside the stage
+    (`.OUT.partial.build`), so OUT never holds it and a kill never loses it."""
+    return stage.with_name(f"{stage.name}{work}")
+
+
+def commit(stage: Path, out: Path, work: str = WORK) -> None:
+    """Rename the finished stage to OUT (atomic.replace_dir: OUT is at every instant the
+    previous complete copy or the new one), keeping its resume state until that has happened.
+
+    The state folder (shard markers) is parked beside the stage with the sha256 of the stage's
+    info.json, then the stage is renamed, then the state deleted. A run that finds the state
+    parked (recover_stage) puts it back when the stage still holds that info.json (the rename
+    had not happened: every shard is kept) and deletes it otherwise.
+    """
+    from ..atomic import rename, replace_dir, write_bytes_atomic
+    from .provenance import sha256_file
+    from .schema import INFO_PATH
+
+    parked = parked_path(stage, work)
+    shutil.rmtree(parked, ignore_errors=True)
+    write_bytes_atomic(stage / work / COMMIT,
+                       json.dumps({"info_sha256": sha256_file(stage / INFO_PATH)}).encode())
+    rename(stage / work, parked)
+    replace_dir(stage, out)
+    shutil.rmtree(parked, ignore_errors=True)
+
+
+def recover_stage(out: Path, stage: Path, work: str = WORK) -> None:
+    """Put right what a run killed in commit left (under the lock): OUT's previous copy back
+    when OUT is missing (atomic.recover_dir), the parked state back into a stage not yet
+    renamed, and otherwise the parked state and the previous copy under the stage's name
+    deleted. Nothing is left beside OUT that no run would use."""
+    from ..atomic import recover_dir, rename
+    from .provenance import sha256_file
+    from .schema import INFO_PATH
+
+    recover_dir(out, INFO_PATH)
+    parked = parked_path(stage, work)
+    if not parked.is_dir():
+        return
+    if stage.is_dir() and not (stage / work).exists():
+        try:
+            want = json.loads((parked / COMMIT).read_text())["info_sha256"]
+            same = sha256_file(stage / INFO_PATH) == want
+        except (OSError, ValueError, KeyError, TypeError):
+            same = False
+        if same:
+            rename(parked, stage / work)
+            return
+        shutil.rmtree(stage, ignore_errors=True)  # the previous copy, swapped out of OUT
+    shutil.rmtree(parked, ignore_errors=True)
+
+
+def recover(out: Path, stage: Path | None = None, work: str = WORK) -> None:
+    """recover_stage before anything looks at OUT, when the lock is free (a run holding it is
+    alive and finishes its own rename)."""
+    if not out.parent.is_dir():
+        return
+    try:
+        with locked_stage(out, stage, work, create=False):
+            pass
+    except (VtsError, OSError):
+        pass
 
 
 def remove_stale(stage: Path, plan: Plan) -> None:

@@ -278,22 +278,27 @@ def group_location(root: str | os.PathLike, kind: str) -> str:
 
 def open_group(root: str | os.PathLike, kind: str,
                storage_options: dict[str, Any] | None = None) -> Any:
-    """Open a dataset's `static` or `slip` group read-only, from a path or an fsspec URL."""
+    """Open a dataset's `static` or `slip` group read-only, from a path or an fsspec URL (read
+    through dataset.location: timeouts, size limits, servers without byte ranges)."""
     import zarr
-    from zarr.storage import FsspecStore, LocalStore
+    from zarr.storage import LocalStore
+
+    from ..jsonio import loads, read_json
 
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
     loc = group_location(root, kind)
     if _is_url(loc):
-        store = FsspecStore.from_url(loc, storage_options=storage_options, read_only=True)
+        from .location import read_remote, remote_store
+
+        meta = f"{loc}/zarr.json"  # within the metadata size limit; NaN, deep nesting...
+        loads(read_remote(meta, storage_options, missing="no such Zarr group"), meta,
+              "Zarr metadata")
+        store = remote_store(loc, storage_options)
     else:
         if not Path(loc).is_dir():
             raise VtsError("no such Zarr group", loc)
         store = LocalStore(loc, read_only=True)
-    if not _is_url(loc):
-        from ..jsonio import read_json
-
         read_json(Path(loc) / "zarr.json", "Zarr metadata")  # NaN, deep nesting, a device...
     try:
         return zarr.open_group(store, mode="r", use_consolidated=True)

@@ -57,7 +57,7 @@ def _summarise(root: Path) -> Summary:
 def _summarise_remote(url: str) -> Summary:
     """summarise of a dataset at a URL: sizes of the files info.json lists."""
     from .index import read_parquet
-    from .loader import Location
+    from .location import Location
     from .remote import remote_info, remote_sizes
 
     loc = Location(url)

@@ -1,10 +1,10 @@
 """`vtsbench verify`: check a built dataset against its own info.json, down to every chunk.
 
-Checks, each problem one line: info.json against its schema; every file's sha256 (missing and
-unlisted files too) and the dataset checksum; split files (schema, sha256, leaks); the index
-(schema, rows 0..N-1, class_idx, counts); the Zarr arrays (shape, dtype, chunking against
-info and the index); and decodes every chunk. Chunks carry a crc32c, so a damaged byte names
-its array, sample and shard; a damaged shard index names the samples of the whole shard.
+verify = the checks `vtsbench.load` makes (vtsbench.dataset.validate: info.json, the index,
+counts, split files and leaks, the Zarr metadata), listed all rather than raised first, plus
+the expensive ones: every file's sha256 (missing and unlisted files too), the dataset checksum,
+and every chunk decoded. Chunks carry a crc32c, so a damaged byte names its array, sample and
+shard; a damaged shard index names the samples of the whole shard. Each problem is one line.
 """
 
 from __future__ import annotations
@@ -17,8 +17,9 @@ from typing import Any
 import numpy as np
 
 from ..errors import VtsError
-from .schema import INFO_PATH, KINDS, Counts, DatasetInfo, SampleMeta, dataset_checksum, load_info
-from .store import DTYPES, Layout
+from .schema import INFO_PATH, KINDS, SPLIT_NAME, DatasetInfo, dataset_checksum, load_info
+from .store import Layout
+from .validate import SHOWN
 
 #: An inner chunk missing from a shard has offset and length 2**64 - 1 in the shard index.
 MISSING = 2**64 - 1
@@ -103,56 +104,49 @@ def check_files(root: Path, info: DatasetInfo, report: VerifyReport,
         report.problems.append(f"{INFO_PATH}: dataset_sha256 does not match the files it lists")
 
 
-def check_index(root: Path, info: DatasetInfo, report: VerifyReport
-                ) -> dict[str, list[SampleMeta]]:
-    """Both indexes: schema, rows in order, class_idx, unique ids, counts against info."""
-    from .index import read_index
+def check_index(root: Path, info: DatasetInfo, report: VerifyReport) -> dict[str, Any]:
+    """Both indexes as the loader checks them (`validate.index_problems`: schema, rows 0..N-1 in
+    order, objects and class_idx, values), ids unique across kinds, counts against info.json;
+    returns the tables that could be read, by kind."""
+    from .index import read_parquet
+    from .validate import counts_problems, ids_problems, index_problems
 
-    out: dict[str, list[SampleMeta]] = {}
+    out: dict[str, Any] = {}
     for kind in KINDS:
         rel = f"index/{kind}.parquet"
         try:
-            metas = read_index(root / rel, kind)
+            table = read_parquet(root / rel)
         except VtsError as e:
             report.problems.append(f"{rel}: {_strip(e, root / rel)}")
             continue
-        out[kind] = metas
-        n = info.shapes.get(kind, {}).get("rgb", (0,))[0]
-        if len(metas) != n:
-            report.problems.append(f"{rel}: {len(metas)} rows, info.json says {n} samples")
-        for i, m in enumerate(metas):
-            if m.row != i:
-                report.problems.append(f"{rel}: sample {m.sample_id} at position {i} has row "
-                                       f"{m.row} (rows must be 0..N-1 in order)")
-                break
-        for m in metas:
-            if m.object not in info.objects or info.objects.index(m.object) != m.class_idx:
-                report.problems.append(f"{rel}: sample {m.sample_id}: class_idx {m.class_idx} "
-                                       f"does not match object {m.object!r}")
-                break
-    ids = [m.sample_id for ms in out.values() for m in ms]
-    if len(ids) != len(set(ids)):
-        dup = sorted({i for i in ids if ids.count(i) > 1})
-        report.problems.append(f"index: sample id {dup[0]!r} appears more than once")
-    report.samples = len(ids)
+        bad = index_problems(table, kind, info)
+        report.problems += [f"{rel}: {b}" for b in bad]
+        if not bad:
+            out[kind] = table
+    report.problems += [f"index: {b}" for b in ids_problems(out)]
+    report.problems += [f"{INFO_PATH}: {b}" for b in counts_problems(info, out)]
+    report.samples = sum(len(t) for t in out.values())
     return out
 
 
-def check_splits(root: Path, info: DatasetInfo, index: dict[str, list[SampleMeta]],
+def check_splits(root: Path, info: DatasetInfo, index: dict[str, Any],
                  report: VerifyReport) -> list[Any]:
-    """Every split file: schema, sha256 against info.json, and the leak check (for the kinds
-    whose index could be read)."""
+    """Every split file as the loader checks it (`validate.split_problems`: name, size and id
+    count, schema, ids known, part sizes, leaks), and its sha256 against info.json."""
     import hashlib
 
-    from .splits import leak_check, read_split
+    from .splits import read_split
+    from .validate import split_limits, split_problems
 
     splits = []
     folder = root / "meta" / "splits"
-    samples = [m for ms in index.values() for m in ms]
+    max_bytes, max_ids = split_limits(sum(s.get("rgb", (0,))[0] for s in info.shapes.values()))
     for name, sha in sorted(info.splits.items()):
         rel, path = f"meta/splits/{name}.json", folder / f"{name}.json"
+        if not SPLIT_NAME.fullmatch(name):
+            continue  # refused with info.json
         try:
-            sp = read_split(path)
+            sp = read_split(path, max_bytes=max_bytes, max_ids=max_ids)
         except VtsError as e:
             report.problems.append(f"{rel}: {_strip(e, path)}")
             continue
@@ -162,11 +156,17 @@ def check_splits(root: Path, info: DatasetInfo, index: dict[str, list[SampleMeta
             report.problems.append(f"{rel}: sha256 mismatch with info.json splits (the split "
                                    "file was changed after the build)")
         if sp.kind in index:
-            report.problems += [f"{rel}: leak: {x}" for x in leak_check(sp, samples)]
+            bad, leaks = split_problems(sp, name, info, index)
+            report.problems += [f"{rel}: {b}" for b in bad]
+            report.problems += [f"{rel}: leak: {name}: {x}" for x in leaks]
     listed = set(info.splits)
     if folder.is_dir():
-        report.problems += [f"meta/splits/{p.name}: split file not named in info.json splits"
-                            for p in sorted(folder.glob("*.json")) if p.stem not in listed]
+        extra = [p.name for p in sorted(folder.glob("*.json")) if p.stem not in listed]
+        report.problems += [f"meta/splits/{n}: split file not named in info.json splits"
+                            for n in extra[:SHOWN]]
+        if len(extra) > SHOWN:
+            report.problems.append(f"meta/splits: {len(extra) - SHOWN} more split files not "
+                                   "named in info.json splits")
     return splits
 
 
@@ -175,45 +175,50 @@ def _strip(e: VtsError, path: Path) -> str:
     return text[len(f"{path}: "):] if text.startswith(f"{path}: ") else text
 
 
-def check_arrays(root: Path, info: DatasetInfo, index: dict[str, list[SampleMeta]],
+def check_arrays(root: Path, info: DatasetInfo, index: dict[str, Any],
                  report: VerifyReport, decode: bool = True,
                  advance: Callable[[int], None] | None = None) -> None:
-    """Shapes, dtypes and chunking against info and the index; then decode every chunk."""
+    """The Zarr metadata as the loader checks it (`validate.zarr_problems`: shapes, dtypes,
+    chunking and depth scale against info.json, each array's zarr.json against the consolidated
+    metadata, the format that wrote them); then decode every chunk."""
+    from ..jsonio import read_json
     from .store import open_group
+    from .validate import zarr_problems
 
     for kind in KINDS:
         where = f"data/{kind}.zarr"
         try:
             group = open_group(root, kind)
+            group_doc = read_json(root / where / "zarr.json", "Zarr metadata")
         except VtsError as e:
             report.problems.append(f"{where}: {_strip(e, root / where)}")
             continue
-        ids = [m.sample_id for m in index.get(kind, [])]
+        docs: dict[str, Any] = {}
+        for name in info.arrays:
+            path = root / where / name / "zarr.json"
+            try:
+                docs[name] = read_json(path, "Zarr metadata")
+            except VtsError as e:
+                docs[name] = None
+                if path.exists():
+                    report.problems.append(f"{where}/{name}/zarr.json: {_strip(e, path)}")
+        bad = zarr_problems(info, kind, group_doc, docs)
+        report.problems += [f"{where}/{b}" for b in bad]
+        if not decode or any(b.startswith("zarr.json") for b in bad):
+            continue
+        table = index.get(kind)
+        ids = [] if table is None else table.column("sample_id").to_pylist()
         sps = info.zarr.samples_per_shard.get(kind, 1)
         for name in info.arrays:
+            if any(b.startswith(f"{name}:") or b.startswith(f"{name}/") for b in bad):
+                continue
             try:
                 arr = group[name]
-            except KeyError:
-                report.problems.append(f"{where}/{name}: array missing")
-                continue
             except Exception as e:  # metadata zarr cannot use (a changed zarr.json)
                 report.problems.append(f"{where}/{name}: cannot open the array "
                                        f"({type(e).__name__}: {_reason(e)})")
                 continue
-            want = tuple(info.shapes.get(kind, {}).get(name, ()))
-            bad = []
-            if tuple(arr.shape) != want:
-                bad.append(f"shape {tuple(arr.shape)}, info.json says {want}")
-            if str(arr.dtype) != DTYPES[name]:
-                bad.append(f"dtype {arr.dtype}, expected {DTYPES[name]}")
-            if arr.chunks != (1, *arr.shape[1:]) or arr.shards != (sps, *arr.shape[1:]):
-                bad.append(f"chunks {arr.chunks} / shards {arr.shards}, expected one sample "
-                           f"per chunk and {sps} per shard")
-            if kind in index and arr.shape[0] != len(ids):
-                bad.append(f"{arr.shape[0]} rows, the index has {len(ids)}")
-            report.problems += [f"{where}/{name}: {b}" for b in bad]
-            if bad or not decode:
-                continue
+            want = tuple(info.shapes[kind][name])
             frames = arr.shape[1] if kind == "slip" and len(arr.shape) > 2 else None
             lay = Layout(kind, arr.shape[0], tuple(want[-2:] if name != "rgb" else want[-3:-1]),
                          frames, sps, info.zarr.level, info.arrays)
@@ -290,12 +295,7 @@ def _verify(root: Path, decode: bool, progress: bool) -> VerifyReport:
             advance = lambda n: bar.advance(t, n)  # noqa: E731
         check_files(root, info, report, advance)
         index = check_index(root, info, report)
-        samples = [m for ms in index.values() for m in ms]
-        splits = check_splits(root, info, index, report)
-        if len(index) == len(KINDS):
-            counts = Counts.of(samples, splits).to_dict()
-            if splits and len(splits) == len(info.splits) and counts != info.counts.to_dict():
-                report.problems.append(f"{INFO_PATH}: counts do not match the index and splits")
+        check_splits(root, info, index, report)
         check_arrays(root, info, index, report, decode, advance)
     return report
 

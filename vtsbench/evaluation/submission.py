@@ -20,13 +20,18 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import VtsError
+from ..errors import VtsError, one_line
 from ..labels import DIRECTION_NAMES, STATES
 
 #: Task -> the index kind it is scored on.
 TASKS = {"state": "slip", "direction": "slip", "object": "static"}
 SLIP = STATES.index("slip")
 MAX_SHOWN = 3
+#: Characters of one offender shown (a 5 MB name is cut, with its length).
+MAX_EXAMPLE = 120
+#: Metadata values that are one line (names, versions, paths): no control character.
+ONE_LINE_KEYS = ("method", "recipe", "dataset", "dataset_version", "vtsbench_version",
+                 "authors", "url")
 #: An integer of at most 18 digits: longer is no class index or seed (and int() of thousands
 #: of digits raises)
 _INT = re.compile(r"[+-]?\d{1,18}")
@@ -55,26 +60,24 @@ class Truth:
 
 
 def load_truth(dataset: str | Path, split: str, part: str = "test") -> Truth:
-    """Labels of a split part from info.json, the split file and the index (no arrays read)."""
-
-    from ..dataset.schema import load_info
-    from ..dataset.splits import read_split
+    """Labels of a split part from info.json, the split file and the index (no arrays read),
+    read and checked by `vtsbench.load` as any use of the dataset is (a leaking split refused)."""
+    from ..dataset.loader import load
 
     root = Path(dataset)
-    info = load_info(root)
+    ds = load(dataset)
+    info = ds.info
     if split not in info.splits:
         raise VtsError(f"no split {split!r}; splits are {', '.join(sorted(info.splits)) or '-'}",
                        root)
-    sp = read_split(root / "meta" / "splits" / f"{split}.json", info.splits[split])
+    sp = ds.split_file(split)
     if part not in sp.parts:
         raise VtsError(f"split {split!r} has no part {part!r}; parts are "
                        f"{', '.join(sp.parts)}", root)
     cols = ["sample_id", "object", "class_idx"]
     if sp.kind == "slip":
         cols += ["state_idx", "direction"]
-    from ..dataset.index import read_parquet
-
-    table = read_parquet(root / "index" / f"{sp.kind}.parquet", cols).to_pydict()
+    table = ds.view(sp.kind).index.select(cols).to_pydict()
     pos = {s: i for i, s in enumerate(table["sample_id"])}
     ids = sorted(sp.parts[part])
     rows = [pos[s] for s in ids if s in pos]
@@ -117,8 +120,8 @@ class Problems:
 
     def add(self, kind: str, example: object) -> None:
         n, ex = self.found.get(kind, (0, []))
-        if len(ex) < MAX_SHOWN:
-            ex.append(str(example))
+        if len(ex) < MAX_SHOWN:  # each on one line and short, whatever the file holds
+            ex.append(one_line(example, MAX_EXAMPLE))
         self.found[kind] = (n + 1, ex)
 
     def lines(self) -> list[str]:
@@ -194,8 +197,9 @@ def read_meta(path: Path) -> dict[str, Any]:
         raise VtsError("metadata file not found (write it beside the submission as "
                        f"{path.name} or pass --meta)", path)
     from ..jsonio import read_json
+    from ..limits import MAX_META_BYTES
 
-    return read_json(path, "metadata JSON")
+    return read_json(path, "metadata JSON", MAX_META_BYTES)
 
 
 def schema_errors(doc: Any, at: str) -> list[str]:
@@ -226,6 +230,11 @@ def validate(path: str | Path, truth: Truth, meta_path: str | Path | None = None
         meta = None
     for e in schema_errors(meta, "metadata") if meta is not None else ():
         probs.add(f"invalid metadata ({meta_path.name})", e)
+    for key in ONE_LINE_KEYS if isinstance(meta, dict) else ():
+        v = meta.get(key)
+        if isinstance(v, str) and v != one_line(v, len(v)):
+            probs.add(f"invalid metadata ({meta_path.name})",
+                      f"{key}: a line break or control character in {v!r}")
     if isinstance(meta, dict):
         v = meta.get("dataset_version")
         if isinstance(v, str) and v != truth.dataset_version:
@@ -258,9 +267,7 @@ def validate(path: str | Path, truth: Truth, meta_path: str | Path | None = None
 
 def _without_path(err: VtsError, path: Path) -> str:
     """A VtsError's message without its leading path, naming the file by its name instead."""
-    text = str(err)
-    if err.path is not None and text.startswith(f"{err.path}: "):
-        text = text[len(str(err.path)) + 2:]
+    text = err.reason if err.path is not None else str(err)
     return f"{text} ({path.name})" if path.name not in text else text
 
 
@@ -314,6 +321,9 @@ def _check_rows(cols: dict[str, list[Any]], n: int, truth: Truth, probs: Problem
         seen.add(key)
         arr = preds.setdefault(task, {}).setdefault(seed, np.full(len(truth.ids), -1, np.int64))
         arr[pos[sid]] = k
+    if not preds and truth.ids:  # no row names a sample of the part: every one is missing
+        probs.found[f"missing ids (0 of {len(truth.ids)} {truth.part} samples predicted)"] = (
+            len(truth.ids), [one_line(s, MAX_EXAMPLE) for s in truth.ids[:MAX_SHOWN]])
     for task, by_seed in preds.items():
         req = truth.required(task)
         for seed, arr in sorted(by_seed.items()):

@@ -27,7 +27,7 @@ import numpy as np
 from vtsbench.errors import VtsError
 from vtsbench.labels import N_DIRECTIONS, STATES, angle_to_class
 from vtsbench.models.motion import frame_shifts, motion_window, shift_scale
-from vtsbench.recipes import Recipe, progress_iter
+from vtsbench.recipes import Recipe, checkpoint_meta, progress_iter
 
 FEATURES = ("mag_mean", "mag_p90", "net", "coherence", "div_mean", "div_abs", "mag_late_ratio",
             "net_late_ratio", "shift", "shift_peak")
@@ -225,12 +225,14 @@ class FlowRecipe(Recipe):
 
         import vtsbench
 
-        with safe_open(str(checkpoint), framework="numpy") as fh:
-            meta = fh.metadata() or {}
-            if meta.get("recipe") != self.name:
-                raise VtsError("not a flow recipe checkpoint", checkpoint)
-            arrays = {k: fh.get_tensor(k) for k in fh.keys()}  # noqa: SIM118 - not a dict
-        config = json.loads(meta["config"])
+        config = checkpoint_meta(checkpoint, self.name, ("config",))["config"]
+        try:
+            with safe_open(str(checkpoint), framework="numpy") as fh:
+                arrays = {k: fh.get_tensor(k) for k in fh.keys()}  # noqa: SIM118 - not a dict
+        except Exception as e:  # safetensors' own error type for damaged data
+            raise VtsError(f"corrupt flow checkpoint ({str(e)[:100]})", checkpoint) from None
+        if not isinstance(config, dict):
+            raise VtsError("corrupt flow checkpoint (its config is not a mapping)", checkpoint)
         if config.get("direction", "phase") not in DIRECTIONS:
             raise VtsError(f"direction must be one of {DIRECTIONS}", checkpoint)
         try:

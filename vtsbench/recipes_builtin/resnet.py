@@ -23,7 +23,7 @@ import torch
 
 from vtsbench.errors import VtsError
 from vtsbench.models.contact_crop import CachedItems
-from vtsbench.recipes import Recipe, fit_view, progress_iter
+from vtsbench.recipes import Recipe, checkpoint_meta, fit_view, progress_iter
 
 MODALITIES = ("rgb", "depth")
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
@@ -199,16 +199,10 @@ class ResnetRecipe(Recipe):
         return res.checkpoint
 
     def _load(self, checkpoint: str | Path, device: str) -> tuple[Any, dict[str, Any], Any]:
-        from safetensors import safe_open
-
         from vtsbench.training import load_checkpoint, resolve_device
 
-        with safe_open(str(checkpoint), framework="pt") as fh:
-            meta = fh.metadata() or {}
-        if meta.get("recipe") != self.name:
-            raise VtsError("not a resnet recipe checkpoint", checkpoint)
-        config = json.loads(meta["recipe_config"])
-        objects = json.loads(meta["objects"])
+        meta = checkpoint_meta(checkpoint, self.name, ("recipe_config", "objects"))
+        config, objects = meta["recipe_config"], meta["objects"]
         model = self._model(config, len(objects), None)
         load_checkpoint(checkpoint, model)
         dev = resolve_device(device)

@@ -25,7 +25,7 @@ import numpy as np
 from vtsbench.errors import VtsError
 from vtsbench.labels import STATES
 from vtsbench.models.contact_crop import FLOW_SOFT_PX, FLOWS, CachedItems
-from vtsbench.recipes import Recipe, fit_view, progress_iter
+from vtsbench.recipes import Recipe, checkpoint_meta, fit_view, progress_iter
 
 MODALITIES = ("rgb", "depth", "rgbd")
 
@@ -291,16 +291,11 @@ class TimesformerRecipe(Recipe):
                 part: str = "test", *, device: str = "auto",
                 progress: bool = False) -> list[dict[str, Any]]:
         import torch
-        from safetensors import safe_open
 
         import vtsbench
         from vtsbench.training import load_checkpoint, resolve_device
 
-        with safe_open(str(checkpoint), framework="pt") as fh:
-            meta = fh.metadata() or {}
-        if meta.get("recipe") != self.name:
-            raise VtsError("not a timesformer recipe checkpoint", checkpoint)
-        config = json.loads(meta["recipe_config"])
+        config = checkpoint_meta(checkpoint, self.name, ("recipe_config",))["recipe_config"]
         model = self._model(config, pretrained=False)
         load_checkpoint(checkpoint, model)
         dev = resolve_device(device)

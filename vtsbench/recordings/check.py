@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import contextlib
 import math
 from collections import Counter, defaultdict
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -12,7 +12,7 @@ from pathlib import Path
 from ..errors import VtsError
 from ..labels import direction_class
 from .manifest import MANIFEST_NAME, Entry, Manifest, read_manifest_doc, schema_errors
-from .media import Probe, folder_frames, frame_notes, media_kind, probe
+from .media import Probe, folder_frames, inspect_frame, media_kind, probe
 
 
 @dataclass
@@ -37,6 +37,9 @@ class _Media:
     error: str | None = None
     bad_frames: dict[int, str] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    #: frame index -> size (H, W) read, for the image frames decoded (every one with deep)
+    sizes: dict[int, tuple[int, int]] = field(default_factory=dict)
+    files: list[Path] = field(default_factory=list)  # an image folder's frames
 
 
 def check_folder(folder: str | Path, deep: bool = False, workers: int = 2,
@@ -135,10 +138,14 @@ def _open_media(folder: Path, m: Manifest, deep: bool, workers: int,
             return rel, out
         if out.probe.kind == "video":
             out.probe, out.bad_frames = _video_frames(path, out.probe, sorted(need[rel]), deep)
-        elif decode:  # what decoding does to a 16-bit or EXIF-oriented frame
-            first = path if out.probe.kind == "image" else folder_frames(path)[0]
-            with contextlib.suppress(VtsError):
-                out.notes = [f"{first}: {n}" for n in frame_notes(first)]
+        elif decode:  # sizes, and what decoding does to a 16-bit or EXIF-oriented frame
+            try:
+                out.files = [path] if out.probe.kind == "image" else folder_frames(path)
+            except VtsError as e:
+                out.error = str(e)
+                return rel, out
+            every = range(len(out.files))
+            _inspect_frames(out, every if deep else sorted({0, *need[rel]} & set(every)))
         return rel, out
 
     lines = LineProgress() if progress and not is_terminal() else None
@@ -152,28 +159,53 @@ def _open_media(folder: Path, m: Manifest, deep: bool, workers: int,
     return out
 
 
+def _inspect_frames(out: _Media, indices: Sequence[int]) -> None:
+    """Decode these frames of an image or image folder: their sizes, the ones that do not
+    decode, and one warning per kind of note (16-bit, EXIF) naming the first frame and how many
+    more have it."""
+    noted: dict[str, list[Path]] = {}
+    for i in indices:
+        f = out.files[i]
+        try:
+            size, notes = inspect_frame(f)
+        except VtsError as e:
+            out.bad_frames[i] = str(e)
+            continue
+        if size is None:
+            out.bad_frames[i] = f"{f.name}: cannot decode image"
+            continue
+        out.sizes[i] = size
+        for n in notes:
+            noted.setdefault(n, []).append(f)
+    out.notes = [f"{fs[0]}: {n}" + (f" (and {len(fs) - 1} more frame(s) in {fs[0].parent})"
+                                    if len(fs) > 1 else "") for n, fs in noted.items()]
+
+
 def _video_frames(path: Path, pr: Probe, frames: list[int], deep: bool
                   ) -> tuple[Probe, dict[int, str]]:
     """Check that the needed frames decode; with deep, decode all and count them exactly."""
-    import cv2
+    from .media import _cv2
+    from .quiet import quiet_decoding
 
+    cv2 = _cv2()
     bad: dict[int, str] = {}
-    cap = cv2.VideoCapture(str(path))
-    try:
-        if deep:
-            n = 0
-            while cap.grab():
-                n += 1
-            return Probe(pr.kind, n, pr.height, pr.width), bad
-        for i in frames:
-            if i >= pr.n_frames:
-                continue  # reported as a range problem
-            cap.set(cv2.CAP_PROP_POS_FRAMES, i)
-            ok, frame = cap.read()
-            if not ok or frame is None:
-                bad[i] = "cannot decode frame"
-    finally:
-        cap.release()
+    with quiet_decoding():
+        cap = cv2.VideoCapture(str(path))
+        try:
+            if deep:
+                n = 0
+                while cap.grab():
+                    n += 1
+                return Probe(pr.kind, n, pr.height, pr.width), bad
+            for i in frames:
+                if i >= pr.n_frames:
+                    continue  # reported as a range problem
+                cap.set(cv2.CAP_PROP_POS_FRAMES, i)
+                ok, frame = cap.read()
+                if not ok or frame is None:
+                    bad[i] = "cannot decode frame"
+        finally:
+            cap.release()
     return pr, bad
 
 
@@ -233,14 +265,31 @@ def _check_entry(folder: Path, m: Manifest, e: Entry, media: dict[str, _Media],
                 problems.append(f"{where}: frame {idx} past the end ({pr.n_frames} frames)")
             else:
                 report.n_frames += 1
+        used = _frames_used(e, pr)
         for i, msg in sorted(info.bad_frames.items()):
-            problems.append(f"{where}: frame {i}: {msg}")
-        if ses is not None and (pr.height, pr.width) != ses.resolution:
-            problems.append(f"{where}: wrong resolution {pr.height}x{pr.width}, session "
+            if pr.kind == "video" or i in used:
+                problems.append(f"{where}: frame {i}: {msg}")
+        sized = [(i, info.sizes[i]) for i in used if i in info.sizes]
+        h, w = sized[0][1] if sized else (pr.height, pr.width)
+        odd = next(((i, s) for i, s in sized if s != (h, w)), None)
+        if odd is not None:
+            problems.append(f"{where}: frames of two sizes: frame {sized[0][0]} is {h}x{w}, "
+                            f"frame {odd[0]} ({info.files[odd[0]].name}) is "
+                            f"{odd[1][0]}x{odd[1][1]}")
+        if ses is not None and (h, w) != ses.resolution:
+            problems.append(f"{where}: wrong resolution {h}x{w}, session "
                             f"{ses.id} says {ses.resolution[0]}x{ses.resolution[1]}")
     _check_labels(e, ses, where, report)
     if e.truth is not None and not (folder / e.truth).is_file():
         problems.append(f"{e.id}: {e.truth}: truth file not found")
+
+
+def _frames_used(e: Entry, pr: Probe) -> range:
+    """The frame indices of its source an entry reads."""
+    src = e.source
+    if e.kind == "sequence":
+        return range(src.start or 0, pr.n_frames if src.stop is None else src.stop)
+    return range(src.frame or 0, (src.frame or 0) + 1)
 
 
 def _check_labels(e: Entry, ses, where: str, report: CheckReport) -> None:
@@ -262,6 +311,11 @@ def _check_labels(e: Entry, ses, where: str, report: CheckReport) -> None:
     for name, v in (("motion_mm", lab.motion_mm), ("contact_px", lab.contact_px)):
         if v is not None and not all(math.isfinite(c) for c in v):
             problems.append(f"{where}: {name} is not finite")
+        elif name == "contact_px" and v is not None and ses is not None:
+            h, w = ses.resolution  # [x, y] in pixels, y down the rows; the edges included
+            if not (0 <= v[0] <= w and 0 <= v[1] <= h):
+                problems.append(f"{where}: contact_px [{v[0]:.6g}, {v[1]:.6g}] outside the "
+                                f"frame (x in 0..{w}, y in 0..{h})")
     if e.kind == "press":
         if e.ball_radius_mm is None:
             problems.append(f"{where}: press without a ball radius (ball_radius_mm)")

@@ -260,9 +260,12 @@ def build_pattern_manifest(folder: Path, opts: ManifestOptions,
 
 
 def _video_fps(path: Path) -> float | None:
-    import cv2
+    from .media import _cv2
+    from .quiet import quiet_decoding
 
-    cap = cv2.VideoCapture(str(path))
+    cv2 = _cv2()
+    with quiet_decoding():
+        cap = cv2.VideoCapture(str(path))
     try:
         fps = cap.get(cv2.CAP_PROP_FPS)
     finally:

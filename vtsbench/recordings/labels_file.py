@@ -48,11 +48,9 @@ def _clean_path(text: str) -> str:
 def read_labels(path: str | Path) -> list[LabelRow]:
     """Rows of a labels CSV: a file column (file|path|folder|filename|name), optional start and
     stop (frames, stop exclusive), and label columns; empty cells mean 'not given'."""
-    path = Path(path)
-    if not path.is_file():
-        raise VtsError("labels file not found", path)
-    if path.stat().st_size > MAX_BYTES:
-        raise VtsError(f"larger than {MAX_BYTES >> 20} MB: not a labels CSV", path)
+    from ..jsonio import regular_file
+
+    path = regular_file(path, "labels file", MAX_BYTES)  # a folder or a FIFO said as such
     old = csv.field_size_limit()
     csv.field_size_limit(MAX_FIELD)
     try:
@@ -63,7 +61,10 @@ def read_labels(path: str | Path) -> list[LabelRow]:
                 raise VtsError(f"{len(header)} columns; at most {MAX_COLUMNS}", path)
             if len(set(header)) != len(header):
                 raise VtsError("a column name appears twice", path)
-            key = next((h for h in header if h in FILE_COLUMNS), None)
+            keys = [h for h in header if h in FILE_COLUMNS]
+            if len(keys) > 1:  # which one names the file? the other would become a field
+                raise VtsError(f"two file columns, {' and '.join(keys)}: keep one", path)
+            key = keys[0] if keys else None
             if key is None:
                 raise VtsError(f"no file column (one of {', '.join(FILE_COLUMNS)}); found "
                                f"{', '.join(header) or 'no header'}", path)

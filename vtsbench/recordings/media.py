@@ -13,12 +13,16 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import VtsError
+from .quiet import quiet_decoding
 
 IMAGE_EXTS = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp"})
 VIDEO_EXTS = frozenset({".mov", ".mp4", ".avi", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg"})
 
 
 def _cv2():
+    from .quiet import quiet_ffmpeg
+
+    quiet_ffmpeg()  # before OpenCV's FFmpeg backend starts
     import cv2
 
     return cv2
@@ -37,14 +41,21 @@ def media_kind(path: Path) -> str:
                    f"videos: {', '.join(sorted(VIDEO_EXTS))})", path)
 
 
-def folder_frames(path: Path) -> list[Path]:
-    """Image files of an image folder, in file-name order."""
-    return sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_EXTS)
-
-
 #: Largest image file read (bytes); OpenCV's own pixel limit (CV_IO_MAX_IMAGE_PIXELS, 2**30 by
 #: default) refuses images that declare more pixels than that.
 MAX_IMAGE_BYTES = 512 << 20
+
+
+def folder_frames(path: Path) -> list[Path]:
+    """Image files of an image folder, in file-name order. An image name that is a folder, a
+    FIFO, a device or a broken link is a one-line error saying so: skipped, it would shift
+    every later frame and surface as a frame range past the end."""
+    from ..jsonio import regular_file
+
+    files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_EXTS)
+    for f in files:
+        regular_file(f, "frame", MAX_IMAGE_BYTES)
+    return files
 
 
 def read_image(path: Path, out: np.ndarray | None = None) -> np.ndarray:
@@ -64,7 +75,9 @@ def read_image(path: Path, out: np.ndarray | None = None) -> np.ndarray:
     if not data:
         raise VtsError("cannot decode image (empty file)", path)
     try:
-        img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR if rgb is None else rgb)
+        with quiet_decoding():
+            img = cv2.imdecode(np.frombuffer(data, np.uint8),
+                               cv2.IMREAD_COLOR if rgb is None else rgb)
     except cv2.error:
         img = None
     if img is None or not img.size:
@@ -85,18 +98,26 @@ class Probe:
 def frame_notes(path: Path) -> list[str]:
     """What decoding does to an image file beyond reading it: 16-bit samples scaled to 8 bits,
     an EXIF orientation applied (OpenCV's documented behaviour); [] for a plain 8-bit frame."""
+    return inspect_frame(path)[1]
+
+
+def inspect_frame(path: Path) -> tuple[tuple[int, int] | None, list[str]]:
+    """The size (H, W) an image file is read at (None when it does not decode) and its
+    `frame_notes`, from one read of the file."""
     from ..jsonio import read_bytes
 
     cv2 = _cv2()
     buf = np.frombuffer(read_bytes(path, "image", MAX_IMAGE_BYTES), np.uint8)
-    notes = []
+    notes: list[str] = []
     try:
-        raw = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED | cv2.IMREAD_IGNORE_ORIENTATION)
-        turned = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+        with quiet_decoding():
+            raw = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED | cv2.IMREAD_IGNORE_ORIENTATION)
+            turned = cv2.imdecode(buf, cv2.IMREAD_COLOR)
     except cv2.error:
-        return notes
+        return None, notes
     if raw is None or turned is None:
-        return notes
+        return None, notes
+    size = (int(turned.shape[0]), int(turned.shape[1]))
     if raw.dtype != np.uint8:
         notes.append(f"{raw.dtype.itemsize * 8}-bit samples: decoded to 8 bits (value / 257, "
                      "OpenCV IMREAD_COLOR)")
@@ -105,10 +126,11 @@ def frame_notes(path: Path) -> list[str]:
                      f"({raw.shape[1]}x{raw.shape[0]} stored, {turned.shape[1]}x"
                      f"{turned.shape[0]} read)")
     else:
-        plain = cv2.imdecode(buf, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+        with quiet_decoding():
+            plain = cv2.imdecode(buf, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
         if plain is not None and not np.array_equal(plain, turned):
             notes.append("EXIF orientation: the frame is flipped or turned as its EXIF tag says")
-    return notes
+    return size, notes
 
 
 def _image_size(path: Path, decode: bool) -> tuple[int, int]:
@@ -136,11 +158,13 @@ def probe(path: Path, decode: bool = True) -> Probe:
             raise VtsError("image folder holds no images", path)
         return Probe(kind, len(files), *_image_size(files[0], decode))
     cv2 = _cv2()
-    cap = cv2.VideoCapture(str(path))
+    with quiet_decoding():
+        cap = cv2.VideoCapture(str(path))
     try:
         if not cap.isOpened():
             raise VtsError("cannot open video (unknown codec or corrupt file)", path)
-        ok, frame = cap.read()
+        with quiet_decoding():
+            ok, frame = cap.read()
         if not ok or frame is None:
             raise VtsError("cannot decode video (no readable frame)", path)
         n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
@@ -200,7 +224,8 @@ def _into(out: np.ndarray | None, imgs: list[np.ndarray]) -> np.ndarray:
 
 def _read_video(path: Path, start: int, stop: int | None) -> np.ndarray:
     cv2 = _cv2()
-    cap = cv2.VideoCapture(str(path))
+    with quiet_decoding():
+        cap = cv2.VideoCapture(str(path))
     try:
         if not cap.isOpened():
             raise VtsError("cannot open video (unknown codec or corrupt file)", path)
@@ -209,7 +234,8 @@ def _read_video(path: Path, start: int, stop: int | None) -> np.ndarray:
         frames = []
         i = start
         while stop is None or i < stop:
-            ok, frame = cap.read()
+            with quiet_decoding():
+                ok, frame = cap.read()
             if not ok:
                 break
             frames.append(cv2.cvtColor(frame, cv2.COLOR_BGR2RGB))
@@ -252,7 +278,8 @@ class Capture:
             if info.kind != "video":
                 raise VtsError(f"not a video file but an {info.kind} (--source takes a camera "
                                "index or a video file)", path)
-            cap = cv2.VideoCapture(str(path))
+            with quiet_decoding():
+                cap = cv2.VideoCapture(str(path))
             if not cap.isOpened():
                 raise VtsError("cannot open video (unknown codec or corrupt file)", path)
             self.n_frames = info.n_frames if info.n_frames > 0 else None

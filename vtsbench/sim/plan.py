@@ -98,9 +98,13 @@ def max_press_depth_mm(size: tuple[int, int], mm_per_px: float) -> float:
 
 def size_problem(size: tuple[int, int], mm_per_px: float, presses: bool) -> str | None:
     """Why a frame size and scale cannot be simulated, or None."""
+    from ..limits import MAX_SIDE_PX
+
     height, width = size
     if height < MIN_SIZE_PX or width < MIN_SIZE_PX:
         return f"frame size {height}x{width} is too small (at least {MIN_SIZE_PX}x{MIN_SIZE_PX})"
+    if height > MAX_SIDE_PX or width > MAX_SIDE_PX:
+        return (f"--size {height}x{width} is too large (at most {MAX_SIDE_PX}x{MAX_SIDE_PX})")
     if not mm_per_px > 0.0 or not math.isfinite(mm_per_px):
         return f"mm_per_px must be a positive number, got {mm_per_px}"
     if presses:

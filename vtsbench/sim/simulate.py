@@ -135,23 +135,28 @@ def run_job(job: Job) -> Entry:
 def _check_args(n_static: int, n_sequences: int, n_presses: int, n_objects: int,
                 size: tuple[int, int], frames: int, n_sessions: int, mm_per_px: float,
                 workers: int, seed: int) -> None:
-    """Raise a one-line VtsError for arguments that cannot be simulated."""
+    """Raise a one-line VtsError for arguments that cannot be simulated, or that are past the
+    bounds of vtsbench/limits.py (checked before any work)."""
+    from .. import limits as lim
+    from ..limits import check_range
+
     for name, n in (("static", n_static), ("sequences", n_sequences), ("presses", n_presses)):
-        if n < 0:
-            raise VtsError(f"--{name} must be >= 0, got {n}")
+        check_range(f"--{name}", n, 0, lim.MAX_SIM_ENTRIES)
     if not 1 <= n_objects <= len(OBJECTS):
         raise VtsError(f"--objects must be between 1 and {len(OBJECTS)}, got {n_objects}")
-    if frames < 2:
-        raise VtsError(f"--frames must be >= 2, got {frames}")
-    if n_sessions < 1:
-        raise VtsError(f"--sessions must be >= 1, got {n_sessions}")
-    if workers < 1:
-        raise VtsError(f"--workers must be >= 1, got {workers}")
-    if seed < 0:
-        raise VtsError(f"--seed must be >= 0, got {seed}")
+    check_range("--frames", frames, 2, lim.MAX_FRAMES)
+    check_range("--sessions", n_sessions, 1, lim.MAX_SIM_SESSIONS)
+    check_range("--workers", workers, 1, lim.MAX_WORKERS)
+    check_range("--seed", seed, 0, lim.MAX_SEED)
+    check_range("--mm-per-px", mm_per_px, 1e-4, 10.0)
     problem = size_problem(size, mm_per_px, n_presses > 0)
     if problem:
         raise VtsError(problem)
+    if n_sequences and frames * size[0] * size[1] > lim.MAX_SEQUENCE_PIXELS:
+        raise VtsError(f"a sequence of {frames} frames of {size[0]}x{size[1]} is "
+                       f"{frames * size[0] * size[1] / 1e6:.0f} million pixels; at most "
+                       f"{lim.MAX_SEQUENCE_PIXELS / 1e6:.0f} million (frames x height x "
+                       "width): use fewer --frames or a smaller --size")
 
 
 def _run_jobs(jobs: list[Job], workers: int, progress: bool) -> list[Entry]:
