@@ -123,3 +123,64 @@ def edit_json(path: Path, change) -> None:
     doc = json.loads(path.read_text())
     change(doc)
     path.write_text(json.dumps(doc, indent=2))
+
+
+def depth_attrs_to_1_0(ds: Path) -> None:
+    """Give the depth arrays the `scale` attribute format 1.0 wrote (1.1 writes the CF
+    `scale_factor`), in each array's zarr.json and the consolidated metadata; hashes recomputed."""
+    def to_1_0(attrs: dict) -> None:
+        attrs["scale"] = attrs.pop("scale_factor")
+
+    for kind in ("static", "slip"):
+        group = ds / "data" / f"{kind}.zarr"
+        edit_json(group / "depth" / "zarr.json", lambda d: to_1_0(d["attributes"]))
+        edit_json(group / "zarr.json", lambda d: to_1_0(
+            d["consolidated_metadata"]["metadata"]["depth"]["attributes"]))
+    rehash(ds)
+
+
+def use_dataset(ds: Path, **kwargs: object) -> None:
+    """Everything a user does with a dataset: load, every part of every split, a read of every
+    array and of the index fields of both kinds."""
+    import vtsbench
+
+    d = vtsbench.load(ds, **kwargs)
+    for name in d.splits:
+        for part in d.parts(name):
+            d.split(name, part)
+    for kind in ("static", "slip"):
+        view = d.view(kind)
+        view.read(slice(None), arrays=d.arrays)
+        view.metas(range(len(view)))
+
+
+def run(*args: object):
+    """`vtsbench ARGS` through typer's test runner (output and exit code, in this process)."""
+    from typer.testing import CliRunner
+
+    from vtsbench.cli import app
+
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+def clean(res, code: int, *names: object) -> str:
+    """Assert a clean failure: the exit code, no traceback, the names in the message."""
+    out = res.output
+    assert res.exit_code == code, out
+    assert isinstance(res.exception, SystemExit), repr(res.exception)
+    assert "Traceback" not in out
+    for n in names:
+        assert str(n) in out, (n, out)
+    return out
+
+
+@pytest.fixture
+def ds(built: Path, tmp_path: Path) -> Path:
+    """A copy of the reference dataset that a test may damage."""
+    return Path(shutil.copytree(built, tmp_path / "ds"))
+
+
+@pytest.fixture
+def rec(sim_recordings: Path, tmp_path: Path) -> Path:
+    """A copy of the reference recordings that a test may change."""
+    return Path(shutil.copytree(sim_recordings, tmp_path / "rec"))

@@ -297,25 +297,13 @@ def _damage_info(ds: Path, rng: random.Random) -> str:
     return f"info.json: {key}"
 
 
-def _use(ds: Path) -> None:
-    """Load, take every part of every split, read every array of both kinds."""
-    import vtsbench
-
-    d = vtsbench.load(ds)
-    for name in d.splits:
-        for part in d.parts(name):
-            d.split(name, part)
-    for kind in ("static", "slip"):
-        view = d.view(kind)
-        view.read(slice(None), arrays=d.arrays)
-        view.metas(range(len(view)))
-
-
 def test_fuzz_damaged_datasets(built: Path, tmp_path: Path,
                                capsys: pytest.CaptureFixture[str]) -> None:
     """Seeded damage to the index, split files, zarr.json and info.json, every checksum
     recomputed: verify reports a problem exactly when the loader refuses (on load or on use),
     and neither ever raises anything but a one-line VtsError."""
+    from test_build_helpers import use_dataset
+
     from vtsbench.dataset.verify import verify
     from vtsbench.errors import VtsError
 
@@ -331,7 +319,7 @@ def test_fuzz_damaged_datasets(built: Path, tmp_path: Path,
         try:
             problems = verify(ds, decode=damage is _damage_zarr).problems
             try:
-                _use(ds)
+                use_dataset(ds)
                 refusal = None
             except VtsError as e:
                 refusal = str(e)

@@ -16,37 +16,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
+from test_build_helpers import clean, run
 
-from vtsbench.cli import app
 from vtsbench.errors import VtsError
 
 pytest_plugins = ["test_build_helpers"]
-
-
-def run(*args: object):
-    return CliRunner().invoke(app, [str(a) for a in args])
-
-
-def clean(res, code: int, *names: object) -> str:
-    """Assert a clean failure: the exit code, no traceback, the names in the message."""
-    out = res.output
-    assert res.exit_code == code, out
-    assert isinstance(res.exception, SystemExit), repr(res.exception)
-    assert "Traceback" not in out
-    for n in names:
-        assert str(n) in out, (n, out)
-    return out
-
-
-@pytest.fixture
-def ds(built: Path, tmp_path: Path) -> Path:
-    return Path(shutil.copytree(built, tmp_path / "ds"))
-
-
-@pytest.fixture
-def rec(sim_recordings: Path, tmp_path: Path) -> Path:
-    return Path(shutil.copytree(sim_recordings, tmp_path / "rec"))
 
 
 def _edit_info(ds: Path, old: str, new: str) -> None:
@@ -103,19 +77,11 @@ def test_metadata_contradicting_arrays_refused_by_the_loader(ds: Path) -> None:
 
 def test_format_1_0_info_without_its_hash_still_loads(ds: Path) -> None:
     """A genuine 1.0 dataset: its depth arrays carry the `scale` attribute 1.0 wrote."""
-    from test_build_helpers import edit_json, rehash
+    from test_build_helpers import depth_attrs_to_1_0
 
     from vtsbench.dataset.schema import load_info
 
-    def to_1_0(attrs: dict) -> None:
-        attrs["scale"] = attrs.pop("scale_factor")
-
-    for kind in ("static", "slip"):
-        group = ds / "data" / f"{kind}.zarr"
-        edit_json(group / "depth" / "zarr.json", lambda d: to_1_0(d["attributes"]))
-        edit_json(group / "zarr.json", lambda d: to_1_0(
-            d["consolidated_metadata"]["metadata"]["depth"]["attributes"]))
-    rehash(ds)
+    depth_attrs_to_1_0(ds)
     info = load_info(ds)
     info.format_version = "1.0"
     (ds / "meta" / "info.json").write_text(info.to_json())

@@ -8,7 +8,6 @@ import csv
 import errno
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -16,37 +15,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
+from test_build_helpers import clean, run
 
-from vtsbench.cli import app
 from vtsbench.errors import VtsError
 
 pytest_plugins = ["test_build_helpers"]
-
-
-def run(*args: object):
-    return CliRunner().invoke(app, [str(a) for a in args])
-
-
-def clean(res, code: int, *names: object) -> str:
-    """Assert a clean failure: the exit code, no traceback, the names in the message."""
-    out = res.output
-    assert res.exit_code == code, out
-    assert isinstance(res.exception, SystemExit), repr(res.exception)
-    assert "Traceback" not in out
-    for n in names:
-        assert str(n) in out, (n, out)
-    return out
-
-
-@pytest.fixture
-def ds(built: Path, tmp_path: Path) -> Path:
-    return Path(shutil.copytree(built, tmp_path / "ds"))
-
-
-@pytest.fixture
-def rec(sim_recordings: Path, tmp_path: Path) -> Path:
-    return Path(shutil.copytree(sim_recordings, tmp_path / "rec"))
 
 
 def _submission(ds: Path, folder: Path, split: str = "unseen_objects", part: str = "test",

@@ -89,19 +89,11 @@ def test_format_1_0_datasets_still_load(dataset_copy: Path) -> None:
     dataset loads and verifies as before (the loader takes the scale from info.json)."""
     import json
 
-    from test_build_helpers import edit_json, rehash
+    from test_build_helpers import depth_attrs_to_1_0
 
     from vtsbench.dataset.verify import verify
 
-    def to_1_0(attrs: dict) -> None:  # the depth attribute 1.0 wrote
-        attrs["scale"] = attrs.pop("scale_factor")
-
-    for kind in ("static", "slip"):
-        group = dataset_copy / "data" / f"{kind}.zarr"
-        edit_json(group / "depth" / "zarr.json", lambda d: to_1_0(d["attributes"]))
-        edit_json(group / "zarr.json", lambda d: to_1_0(
-            d["consolidated_metadata"]["metadata"]["depth"]["attributes"]))
-    rehash(dataset_copy)
+    depth_attrs_to_1_0(dataset_copy)
     info = dataset_copy / "meta" / "info.json"
     doc = json.loads(info.read_text())
     assert doc["format_version"] == "1.1"

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pyarrow as pa
 import pytest
-from test_build_helpers import edit_json, rehash, rewrite_index, write_info_text
+from test_build_helpers import edit_json, rehash, rewrite_index, use_dataset, write_info_text
 from typer.testing import CliRunner
 
 import vtsbench
@@ -22,24 +22,6 @@ from vtsbench.dataset.verify import verify
 from vtsbench.errors import VtsError
 
 pytest_plugins = ["test_build_helpers"]
-
-
-@pytest.fixture
-def ds(built: Path, tmp_path: Path) -> Path:
-    return Path(shutil.copytree(built, tmp_path / "ds"))
-
-
-def use(ds: Path, **kwargs: object) -> None:
-    """Everything a user does with a dataset: load, every part of every split, a read of every
-    array of both kinds."""
-    d = vtsbench.load(ds, **kwargs)
-    for name in d.splits:
-        for part in d.parts(name):
-            d.split(name, part)
-    for kind in ("static", "slip"):
-        view = d.view(kind)
-        view.read(slice(None), arrays=d.arrays)
-        view.metas(range(len(view)))
 
 
 def set_column(kind: str, name: str, row: int, value: object) -> Callable[[Path], None]:
@@ -145,7 +127,7 @@ DAMAGE = {
 
 def test_intact_dataset_verifies_and_loads(built: Path) -> None:
     assert verify(built, decode=False).ok
-    use(built)
+    use_dataset(built)
 
 
 @pytest.mark.parametrize("damage", DAMAGE.values(), ids=list(DAMAGE))
@@ -156,7 +138,7 @@ def test_verify_and_the_loader_agree(ds: Path, damage: Callable[[Path], None]) -
     assert not any(p.endswith("sha256 mismatch") or "sha256 mismatch" in p for p in problems), \
         problems  # the damage is not told by a checksum
     with pytest.raises(VtsError) as e:
-        use(ds)
+        use_dataset(ds)
     assert "\n" not in str(e.value)
 
 
