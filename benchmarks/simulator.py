@@ -5,7 +5,9 @@ Run: .venv/bin/python benchmarks/simulator.py [--scenes 15] [--size 480x640] [--
 For each scene kind (static frame, held sequence, press sequence, slip sequence, calibration
 press) the same scenes are rendered with the effects the simulator gives them and with every
 effect forced on and nothing cropped (Effects.everything()); then rendered and written (PNG
-frames + truth .npz) as `vtsbench simulate` does. Prints a markdown table and the machine.
+frames + truth .npz) as `vtsbench simulate` does; then the generator-2 scenes (contact
+mechanics, uneven speed, contact made or lost, the gel's pattern and camera). Prints a markdown
+table and the machine.
 """
 
 from __future__ import annotations
@@ -37,10 +39,12 @@ from vtsbench.sim.plan import (
 from vtsbench.sim.scene import Effects, Scene, render
 
 KINDS = ("static frame", "held sequence", "press sequence", "slip sequence", "calibration press")
+#: (kind, generator) rows of the table: every kind of generator 1, then generator 2's.
+ROWS = tuple((k, 1) for k in KINDS) + tuple((k, 2) for k in KINDS)
 
 
 def make_scenes(kind: str, n: int, size: tuple[int, int], mm_per_px: float,
-                frames: int) -> list[Scene]:
+                frames: int, generator: int = 1) -> list[Scene]:
     """n scenes of a kind, cycling over the 15 object classes, as the simulator draws them."""
     scenes = []
     state = {"held sequence": "static", "press sequence": "press", "slip sequence": "slip"}
@@ -48,12 +52,14 @@ def make_scenes(kind: str, n: int, size: tuple[int, int], mm_per_px: float,
         rng = np.random.default_rng([12345, KINDS.index(kind), i])
         obj = OBJECTS[i % len(OBJECTS)].name
         if kind == "static frame":
-            scenes.append(static_scene(EntryPlan("static", i + 1, 0, obj), rng, size, mm_per_px))
+            scenes.append(static_scene(EntryPlan("static", i + 1, 0, obj), rng, size, mm_per_px,
+                                       generator))
         elif kind == "calibration press":
-            scenes.append(press_scene(rng, size, mm_per_px))
+            scenes.append(press_scene(rng, size, mm_per_px, generator))
         else:
             plan = EntryPlan("sequence", i + 1, 0, obj, state[kind])
-            scenes.append(sequence_plan_scene(plan, rng, size, mm_per_px, frames)[0])
+            scenes.append(sequence_plan_scene(plan, rng, size, mm_per_px, frames,
+                                              generator)[0])
     return scenes
 
 
@@ -101,14 +107,15 @@ def main() -> None:
                 write_png(out / f"{t:03d}.png", frame)
             write_truth(out / "truth.npz", Truth(r.depth_mm, r.grad, r.contact, r.motion_px))
 
-        for kind in KINDS:
-            scenes = make_scenes(kind, args.scenes, size, args.mm_per_px, args.frames)
+        for kind, gen in ROWS:
+            scenes = make_scenes(kind, args.scenes, size, args.mm_per_px, args.frames, gen)
             forced = [s.with_effects(Effects.everything()) for s in scenes]
             render(scenes[0], capture, np.random.default_rng(0))  # warm-up (lazy imports)
             minimal = timed(scenes, lambda s, rng: render(s, capture, rng), args.repeats)
             full = timed(forced, lambda s, rng: render(s, capture, rng), args.repeats)
             written = timed(scenes, write, args.repeats)
-            rows.append((kind, sum(s.n_frames for s in scenes), minimal, full, written))
+            rows.append((f"{kind}, generator {gen}", sum(s.n_frames for s in scenes), minimal,
+                         full, written))
     print(f"Simulator throughput at {h}x{w}, {args.mm_per_px} mm/px, one core "
           f"(best of {args.repeats}; {args.scenes} scenes per kind, objects cycling over the 15 "
           "classes)\n")
@@ -118,13 +125,15 @@ def main() -> None:
     for kind, n, minimal, full, written in rows:
         print(f"| {kind} | {n} | {minimal:.1f} | {full:.1f} | {minimal / full:.1f}x | "
               f"{written:.1f} |")
-    tot = sum(r[1] for r in rows)
+    for gen in (1, 2):
+        part = [r for r in rows if r[0].endswith(f"generator {gen}")]
+        tot = sum(r[1] for r in part)
 
-    def overall(i: int) -> float:
-        return tot / sum(r[1] / r[i] for r in rows)
+        def overall(i: int, part=part, tot=tot) -> float:
+            return tot / sum(r[1] / r[i] for r in part)
 
-    print(f"| all kinds | {tot} | {overall(2):.1f} | {overall(3):.1f} | "
-          f"{overall(2) / overall(3):.1f}x | {overall(4):.1f} |")
+        print(f"| all kinds, generator {gen} | {tot} | {overall(2):.1f} | {overall(3):.1f} | "
+              f"{overall(2) / overall(3):.1f}x | {overall(4):.1f} |")
     print(f"\nMachine: {machine()}")
 
 

@@ -8,6 +8,7 @@ import csv
 import errno
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -257,6 +258,10 @@ def test_deep_check_sees_sizes_and_16_bit_frames_in_a_sequence(make_recordings) 
     out = clean(run("check", root, "--deep"), 1, "seq-2", "48x64", "24x32", "003.png")
     assert "1 problem" in out
     assert f"{root / 'seqdir' / '005.png'}: 16-bit samples" in out
+    from vtsbench.recordings.media import read_frames
+
+    with pytest.raises(VtsError, match=r"frames of two sizes: 000.png is 48x64, 003.png is 24x32"):
+        read_frames(root / "seqdir", 0, 8)  # what build says of the sequence
 
 
 # -- 14: eval says which ids are missing even when no row names one ----------------------------
@@ -270,6 +275,8 @@ def test_eval_lists_missing_ids_when_no_row_matches(ds: Path, tmp_path: Path) ->
     out = clean(run("eval", sub, "--dataset", ds, "--split", "unseen_objects"), 2, "sub.csv",
                 "ids not in split", f"missing ids (0 of {n} test samples predicted): {n}")
     assert "2 problem(s)" in out
+    shown = re.search(r"ids not in split [^:]+: \d+ \(first: ([^)]*)\)", out).group(1).split(", ")
+    assert len(shown) == len(set(shown)), out  # a sample's state and direction rows: named once
 
 
 # -- 15: an empty split part, two file columns, a Hub repository id ----------------------------

@@ -216,6 +216,19 @@ def test_info_or_index_that_is_no_file_is_said_so(ds: Path, what: str) -> None:
         res = CliRunner().invoke(app, ["verify", str(d), "--quick"])
         assert res.exit_code == 1 and "not found" not in res.output, res.output
         assert "a folder" in res.output or "a pipe" in res.output, res.output
+        lines = [ln for ln in res.output.splitlines() if ln.startswith(f"problem {rel}")]
+        assert rel == "meta/info.json" or len(lines) == 1, res.output  # never also "missing"
+        assert "missing" not in res.output, res.output
+
+
+def test_a_shard_linked_to_a_device_is_not_called_missing(ds: Path) -> None:
+    shard = next(p for p in sorted((ds / "data" / "static.zarr" / "rgb").rglob("*"))
+                 if p.is_file())
+    shard.unlink()
+    shard.symlink_to("/dev/zero")
+    res = CliRunner().invoke(app, ["verify", str(ds), "--quick"])
+    assert res.exit_code == 1 and "missing" not in res.output, res.output
+    assert "not a regular file but a pipe, device or socket" in res.output, res.output
 
 
 def test_duplicate_keys_are_refused_in_every_json_read(tmp_path: Path) -> None:

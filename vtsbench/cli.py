@@ -244,6 +244,12 @@ def simulate(
     overwrite: Annotated[bool, typer.Option(
         "--overwrite", help="Replace OUT if it exists.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
+    generator: Annotated[int, typer.Option(
+        min=1, max=2,
+        help="Simulator version: 1 (default) the first simulator (rigid shifts at constant "
+             "speed, clean sensor), the same bytes as before for a seed; 2 partial slip, "
+             "rotation, uneven speed, contact made or lost, the gel's fixed pattern and a real "
+             "camera (being calibrated to real video: docs/simulator.md).")] = 1,
 ) -> None:
     """Write a synthetic recordings folder with exact ground-truth depth and gradients.
 
@@ -253,7 +259,8 @@ def simulate(
 
     m = _run(run_sim, out, seed=seed, n_static=static, n_sequences=sequences, n_presses=presses,
              n_objects=objects, size=_parse_size(size), frames=frames, n_sessions=sessions,
-             mm_per_px=mm_per_px, workers=workers, overwrite=overwrite, progress=not quiet)
+             mm_per_px=mm_per_px, workers=workers, overwrite=overwrite, progress=not quiet,
+             generator=generator)
     typer.echo(f"wrote {len(m.entries)} entries in {len(m.sessions)} sessions to {out}")
 
 

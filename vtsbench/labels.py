@@ -8,6 +8,7 @@ counter-clockwise from +x (image right) with y pointing UP the image. Class k in
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 STATES: tuple[str, ...] = ("static", "press", "slip")
@@ -92,3 +93,23 @@ def label_motion(dx_mm: float, dy_mm: float, dz_mm: float,
     if dz_mm <= -thresholds.press_mm:
         return MotionLabel(None, None, motion)
     return MotionLabel("static", None, motion)
+
+
+def label_contact_window(positions_mm: Sequence[tuple[float, float]],
+                         depths_mm: Sequence[float], in_contact: Sequence[bool],
+                         thresholds: Thresholds = Thresholds()) -> MotionLabel:
+    """Label a window in which contact may be made or lost, from the object's commanded motion.
+
+    The lateral motion is the object's displacement (image frame, x right, y up) between the
+    first and the last frame in contact (what the imprint shows); the indentation change is
+    max(0, last depth) - max(0, first depth) (a depth below 0 is the object above the gel).
+    Then label_motion applies: contact made without slip is a press (when the final indentation
+    reaches press_mm), contact lost without slip a release (unknown), either with a slip while
+    in contact a slip in that direction. A window with no contact at all is unknown.
+    """
+    frames = [i for i, c in enumerate(in_contact) if c]
+    if not frames:
+        return MotionLabel(None, None, (0.0, 0.0))
+    (x0, y0), (x1, y1) = positions_mm[frames[0]], positions_mm[frames[-1]]
+    dz = max(0.0, depths_mm[-1]) - max(0.0, depths_mm[0])
+    return label_motion(x1 - x0, y1 - y0, dz, thresholds)

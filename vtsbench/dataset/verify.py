@@ -80,6 +80,20 @@ def _rows(ids: list[str], rows: range) -> str:
             "the whole shard)")
 
 
+def _not_a_file(path: Path) -> str:
+    """Why a listed file is not among the dataset's regular files: missing, a folder, or a
+    pipe, device or socket (a link to /dev/zero must not read as "missing")."""
+    from ..jsonio import regular_file
+
+    if not (path.exists() or path.is_symlink()):
+        return "missing"
+    try:
+        regular_file(path, "dataset file")
+    except VtsError as e:
+        return e.reason
+    return "missing"
+
+
 def check_files(root: Path, info: DatasetInfo, report: VerifyReport,
                 advance: Callable[[int], None] | None = None) -> None:
     """sha256 of every listed file; missing and unlisted files; the dataset checksum."""
@@ -88,8 +102,8 @@ def check_files(root: Path, info: DatasetInfo, report: VerifyReport,
     on_disk = {p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file()}
     for rel in sorted(info.files):
         path = root / rel
-        if rel not in on_disk:
-            report.problems.append(f"{rel}: missing")
+        if rel not in on_disk:  # missing, or there but no regular file: say which
+            report.problems.append(f"{rel}: {_not_a_file(path)}")
         else:
             got = sha256_file(path)
             if got != info.files[rel]:
@@ -297,7 +311,19 @@ def _verify(root: Path, decode: bool, progress: bool) -> VerifyReport:
         index = check_index(root, info, report)
         check_splits(root, info, index, report)
         check_arrays(root, info, index, report, decode, advance)
+    report.problems = _one_kind_line_per_file(report.problems)
     return report
+
+
+def _one_kind_line_per_file(problems: list[str]) -> list[str]:
+    """The file checks and the index checks both see a listed file that is a folder, pipe or
+    device: of the lines saying so for one file, keep the last (the more specific)."""
+    def kind_of(p: str) -> str | None:
+        rel, _, reason = p.partition(": ")
+        return rel if reason.startswith(("not a regular file", "is a folder")) else None
+
+    last = {kind_of(p): i for i, p in enumerate(problems) if kind_of(p)}
+    return [p for i, p in enumerate(problems) if kind_of(p) is None or last[kind_of(p)] == i]
 
 
 def _bar(enabled: bool) -> Any:

@@ -120,8 +120,9 @@ class Problems:
 
     def add(self, kind: str, example: object) -> None:
         n, ex = self.found.get(kind, (0, []))
-        if len(ex) < MAX_SHOWN:  # each on one line and short, whatever the file holds
-            ex.append(one_line(example, MAX_EXAMPLE))
+        shown = one_line(example, MAX_EXAMPLE)
+        if len(ex) < MAX_SHOWN and shown not in ex:  # short, one line, each offender once
+            ex.append(shown)
         self.found[kind] = (n + 1, ex)
 
     def lines(self) -> list[str]:

@@ -193,12 +193,13 @@ def read_frames(path: Path, start: int = 0, stop: int | None = None,
         if stop > len(files) or start >= stop:
             raise VtsError(f"frame range [{start}, {stop}) outside the {len(files)} images", path)
         if out is None or len(out) != stop - start:
-            return np.stack([read_image(f) for f in files[start:stop]])
+            chosen = files[start:stop]
+            return _stack_frames(path, chosen, [read_image(f) for f in chosen])
         for t, f in enumerate(files[start:stop]):
             img = read_image(f, out[t])  # decoded in place when it can be
             if img.shape != out.shape[1:]:  # another size: the caller sees it in the result
-                return np.stack([*out[:t], img,
-                                 *(read_image(g) for g in files[start + t + 1:stop])])
+                return _stack_frames(path, files[start:stop], [
+                    *out[:t], img, *(read_image(g) for g in files[start + t + 1:stop])])
             if not np.shares_memory(img, out[t]):
                 out[t] = img  # one copy per frame, not a stack and then a copy into the shard
         return out
@@ -210,6 +211,18 @@ def read_frames(path: Path, start: int = 0, stop: int | None = None,
         out[...] = frames
         return out
     return frames
+
+
+def _stack_frames(folder: Path, files: list[Path], imgs: list[np.ndarray]) -> np.ndarray:
+    """The frames of an image folder stacked; frames of two sizes are a one-line error naming
+    the first frame of another size (a sequence is one camera at one resolution)."""
+    for t, img in enumerate(imgs):
+        if img.shape != imgs[0].shape:
+            size = "x".join(map(str, imgs[0].shape[:2]))
+            other = "x".join(map(str, img.shape[:2]))
+            raise VtsError(f"frames of two sizes: {files[0].name} is {size}, {files[t].name} is "
+                           f"{other}", folder)
+    return np.stack(imgs)
 
 
 def _into(out: np.ndarray | None, imgs: list[np.ndarray]) -> np.ndarray:

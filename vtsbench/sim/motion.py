@@ -34,6 +34,10 @@ class Motion:
     dy_mm: float
     depth0_mm: float
     depth1_mm: float
+    #: Share of the lateral motion reached at each frame (None: constant speed).
+    progress: tuple[float, ...] | None = None
+    #: Depth per frame (None: linear from depth0_mm to depth1_mm); negative: above the gel.
+    depth_path: tuple[float, ...] | None = None
 
     def label(self) -> MotionLabel:
         """State, direction and motion from the shared labelling rule."""
@@ -41,6 +45,10 @@ class Motion:
 
     def depths(self, n: int) -> tuple[float, ...]:
         """Depth per frame, linear from the first to the last (constant when equal)."""
+        if self.depth_path is not None:
+            if len(self.depth_path) != n:
+                raise ValueError(f"the depth path has {len(self.depth_path)} frames, not {n}")
+            return self.depth_path
         if self.depth0_mm == self.depth1_mm:
             return (self.depth0_mm,) * n
         return tuple(self.depth0_mm + (self.depth1_mm - self.depth0_mm) * i / (n - 1)
@@ -48,12 +56,22 @@ class Motion:
 
     def centers(self, start_px: tuple[float, float], n: int,
                 mm_per_px: float) -> tuple[tuple[float, float], ...]:
-        """Object centre per frame (px, y down the rows) at constant velocity from start_px."""
+        """Object centre per frame (px, y down the rows) from start_px, at constant velocity or
+        along the motion's progress."""
         if self.dx_mm == 0.0 and self.dy_mm == 0.0:
             return (start_px,) * n
         x0, y0 = start_px
         ddx, ddy = self.dx_mm / mm_per_px, -self.dy_mm / mm_per_px
+        if self.progress is not None:
+            if len(self.progress) != n:
+                raise ValueError(f"the progress has {len(self.progress)} frames, not {n}")
+            return tuple((x0 + ddx * p, y0 + ddy * p) for p in self.progress)
         return tuple((x0 + ddx * i / (n - 1), y0 + ddy * i / (n - 1)) for i in range(n))
+
+    def positions_mm(self, n: int) -> tuple[tuple[float, float], ...]:
+        """Object displacement from the first frame per frame, image frame (x right, y up), mm."""
+        prog = self.progress or tuple(i / (n - 1) for i in range(n))
+        return tuple((self.dx_mm * p, self.dy_mm * p) for p in prog)
 
 
 def hold(depth_mm: float) -> Motion:

@@ -41,10 +41,12 @@ SHOT_VAR_PER_DN = 0.04
 
 @dataclass(frozen=True)
 class Capture:
-    """Camera settings of one session: read noise (DN) and exposure (a gain on the signal)."""
+    """Camera settings of one session: read noise (DN), exposure (a gain on the signal) and
+    the gel the sensor wears (its number draws a version-2 scene's fixed gel pattern)."""
 
     read_noise: float = 1.5
     exposure: float = 1.0
+    gel: int = 0
 
 
 @dataclass(frozen=True, eq=False)

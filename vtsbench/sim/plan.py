@@ -6,14 +6,15 @@ an entry's files do not depend on which worker renders it or in which order.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..labels import STATES
-from .motion import Motion, place_path, sample_motion, sequence_scene
-from .objects import BALL, BALL_RADIUS_MM, OBJECTS, random_instance
+from .motion import SLIP_RANGE_MM, Motion, place_path, sample_motion, sequence_scene
+from .objects import BALL, BALL_RADIUS_MM, OBJECTS, ObjectInstance, random_instance
 from .scene import Effects, Scene
 
 KIND_CODES = {"static": 0, "sequence": 1, "press": 2}
@@ -27,6 +28,14 @@ PRESS_CLEARANCE_MM = 0.15
 #: Smallest contact radius (px) of the shallowest calibration press worth recording.
 MIN_PRESS_RADIUS_PX = 4.0
 MIN_SIZE_PX = 32
+#: Generator versions: 1 rigid shifts at constant speed on a clean sensor; 2 contact mechanics,
+#: uneven speed, contact made or lost, the gel's fixed pattern and a real camera.
+GENERATORS = (1, 2)
+LATEST_GENERATOR = 2
+#: What `vtsbench simulate` writes unless told: 1 until generator 2's defaults sit inside the real
+#: clips' ranges (`vtsbench stats`) and the benchmark and its published results are rebuilt on it,
+#: so that the demo's dataset, docs/results.md and the leaderboards keep describing one simulator.
+DEFAULT_GENERATOR = 1
 
 
 @dataclass(frozen=True)
@@ -122,8 +131,20 @@ def size_problem(size: tuple[int, int], mm_per_px: float, presses: bool) -> str 
     return None
 
 
+def _generation(scene: Scene, generator: int) -> Scene:
+    """The scene with the sensor of its generator: version 2 adds the gel mechanics and the
+    sensor's appearance (fixed pattern, camera); version 1 leaves it as it is."""
+    if generator < 2:
+        return scene
+    from .appearance import Appearance
+    from .mechanics import Mechanics
+
+    return dataclasses.replace(scene, mechanics=scene.mechanics or Mechanics(),
+                               appearance=Appearance())
+
+
 def static_scene(plan: EntryPlan, rng: np.random.Generator, size: tuple[int, int],
-                 mm_per_px: float) -> Scene:
+                 mm_per_px: float, generator: int = 1) -> Scene:
     """A single frame of a held object at a random pose, place and depth."""
     from .objects import by_name
 
@@ -131,23 +152,82 @@ def static_scene(plan: EntryPlan, rng: np.random.Generator, size: tuple[int, int
     obj = random_instance(cls, rng)
     depth = float(rng.uniform(*cls.depth_mm))
     center = place_path(Motion(0.0, 0.0, depth, depth), rng, size, mm_per_px)
-    return Scene(obj, (center,), (depth,), size, mm_per_px,
-                 Effects(texture=cls.texture is not None))
+    return _generation(Scene(obj, (center,), (depth,), size, mm_per_px,
+                             Effects(texture=cls.texture is not None)), generator)
 
 
 def sequence_plan_scene(plan: EntryPlan, rng: np.random.Generator, size: tuple[int, int],
-                        mm_per_px: float, n_frames: int) -> tuple[Scene, Motion]:
+                        mm_per_px: float, n_frames: int,
+                        generator: int = 1) -> tuple[Scene, Motion]:
     """A sequence of the plan's intended state, and the motion that made it."""
     from .objects import by_name
 
     cls = by_name(plan.object)
     obj = random_instance(cls, rng)
     motion = sample_motion(plan.state or "static", rng, cls.depth_mm)
+    if generator >= 2 and plan.state in ("press", "slip"):
+        return _moving_scene_v2(obj, motion, plan.state, rng, size, mm_per_px, n_frames)
     start = place_path(motion, rng, size, mm_per_px)
-    return sequence_scene(obj, motion, start, n_frames, size, mm_per_px), motion
+    scene = sequence_scene(obj, motion, start, n_frames, size, mm_per_px)
+    return _generation(scene, generator), motion
 
 
-def press_scene(rng: np.random.Generator, size: tuple[int, int], mm_per_px: float) -> Scene:
+def _contact_change(state: str, motion: Motion, prog: tuple[float, ...],
+                    rng: np.random.Generator, share: float) -> tuple[str | None, int]:
+    """Whether contact is made or lost inside the window, and the frame it changes at.
+
+    'made' at k: no contact before frame k; 'lost' at k: no contact from frame k. A slip's
+    change frame leaves at least the smallest slip (SLIP_RANGE_MM[0]) in contact, so that the
+    window stays a slip under the labelling rule.
+    """
+    n = len(prog)
+    if n < 3 or rng.random() >= share:
+        return None, 0
+    if state == "press":
+        return "made", int(rng.integers(1, n - 1))
+    dist = math.hypot(motion.dx_mm, motion.dy_mm)
+    made = rng.random() < 0.5
+    if made:
+        ks = [k for k in range(1, n - 1) if (1.0 - prog[k]) * dist >= SLIP_RANGE_MM[0]]
+    else:
+        ks = [k for k in range(2, n) if prog[k - 1] * dist >= SLIP_RANGE_MM[0]]
+    if not ks:
+        return None, 0
+    return ("made" if made else "lost"), int(ks[int(rng.integers(len(ks)))])
+
+
+def _moving_scene_v2(obj: ObjectInstance, motion: Motion, state: str,
+                     rng: np.random.Generator, size: tuple[int, int], mm_per_px: float,
+                     n_frames: int) -> tuple[Scene, Motion]:
+    """A generator-2 press or slip: uneven speed, rotation, partial slip of the gel, and
+    contact made or lost inside the window (docs/simulator.md, "Generator 2")."""
+    from .mechanics import Mechanics, contact_path, progress, step_weights
+
+    mech = Mechanics()
+    kind, weights = step_weights(mech, rng, n_frames - 1)
+    prog = progress(weights)
+    d0, d1 = motion.depth0_mm, motion.depth1_mm
+    depths = [d0 + (d1 - d0) * p for p in prog]
+    change, k = _contact_change(state, motion, prog, rng, mech.contact_change_share)
+    if change is not None:
+        above = -(float(rng.uniform(*mech.lift_mm)) + obj.texture_bound_mm)
+        gone = range(k) if change == "made" else range(k, n_frames)
+        for t in gone:
+            depths[t] = above
+    motion = dataclasses.replace(motion, progress=prog, depth_path=tuple(depths),
+                                 depth0_mm=depths[0], depth1_mm=depths[-1])
+    total_px = (motion.dx_mm / mm_per_px, -motion.dy_mm / mm_per_px)
+    path = contact_path(mech, rng, prog, total_px, mm_per_px,
+                        k if change == "made" else 0, kind, change)
+    start = place_path(motion, rng, size, mm_per_px)
+    effects = Effects(texture=obj.cls.texture is not None, motion=True)
+    scene = Scene(obj, motion.centers(start, n_frames, mm_per_px), motion.depths(n_frames), size,
+                  mm_per_px, effects, mechanics=mech, path=path)
+    return _generation(scene, 2), motion
+
+
+def press_scene(rng: np.random.Generator, size: tuple[int, int], mm_per_px: float,
+                generator: int = 1) -> Scene:
     """A calibration press: the smooth ball at a random depth, its contact inside the frame."""
     height, width = size
     depth = float(rng.uniform(PRESS_DEPTH_MM[0], max_press_depth_mm(size, mm_per_px)))
@@ -155,4 +235,5 @@ def press_scene(rng: np.random.Generator, size: tuple[int, int], mm_per_px: floa
     cx = float(rng.uniform(min(reach, (width - 1) / 2), max(reach, width - 1 - reach)))
     cy = float(rng.uniform(min(reach, (height - 1) / 2), max(reach, height - 1 - reach)))
     obj = random_instance(BALL, rng)
-    return Scene(obj, ((cx, cy),), (depth,), size, mm_per_px, Effects(texture=False))
+    return _generation(Scene(obj, ((cx, cy),), (depth,), size, mm_per_px,
+                             Effects(texture=False)), generator)

@@ -13,12 +13,17 @@ import dataclasses
 import math
 from collections import Counter
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from . import gel
 from .objects import ObjectInstance
 from .optics import Capture, capture_frame, sensor
+
+if TYPE_CHECKING:
+    from .appearance import Appearance
+    from .mechanics import ContactPath, Mechanics
 
 #: How many times each stage ran (a spy for tests and benchmarks): geometry, texture, gel, shade.
 COUNTS: Counter[str] = Counter()
@@ -53,6 +58,12 @@ class Scene:
     size: tuple[int, int]  # (height, width)
     mm_per_px: float
     effects: Effects = Effects()
+    #: Generator 2: gel constants of the contact mechanics (None: the gel has no shear).
+    mechanics: Mechanics | None = None
+    #: Generator 2: the sensor's fixed gel pattern and camera (None: none of them).
+    appearance: Appearance | None = None
+    #: Generator 2: rotation, gel shear and stick region per frame (None: a rigid shift).
+    path: ContactPath | None = None
 
     def __post_init__(self) -> None:
         """Refuse inconsistent scenes: one centre and depth per frame, motion declared."""
@@ -60,6 +71,12 @@ class Scene:
             raise ValueError("a scene needs one centre and one depth per frame")
         if not self.effects.motion and len(set(self.centers_px)) > 1:
             raise ValueError("the object moves but the scene's effects say no motion")
+        if self.path is not None:
+            if len(self.path.rotations_deg) != self.n_frames or len(self.path.stick) != \
+                    self.n_frames:
+                raise ValueError("a contact path needs one rotation and stick ratio per frame")
+            if not self.effects.motion and len(set(self.path.rotations_deg)) > 1:
+                raise ValueError("the object rotates but the scene's effects say no motion")
 
     @property
     def n_frames(self) -> int:
@@ -80,6 +97,9 @@ class Rendered:
     grad: np.ndarray  # (T, H, W, 2) float32, (dD/dx, dD/dy) with y down the rows
     contact: np.ndarray  # (T, H, W) bool
     motion_px: np.ndarray  # (T, 2) float32, object displacement from frame 0 (x right, y down)
+    #: (T, H, W, 2) float32: the gel surface's tangential displacement from frame 0 in px (x
+    #: right, y down), or None where the surface does not move (no contact path).
+    surface_px: np.ndarray | None = None
 
 
 @dataclass
@@ -114,15 +134,18 @@ def _align_up(a: int, f: int) -> int:
     return -((-a) // f) * f
 
 
-def _geometry(scene: Scene, center: tuple[float, float], reach_mm: float) -> _Geometry:
-    """Evaluate the object (shape, and texture where it can reach depth reach_mm) on its box."""
+def _geometry(scene: Scene, center: tuple[float, float], reach_mm: float,
+              obj: ObjectInstance | None = None) -> _Geometry:
+    """Evaluate the object (shape, and texture where it can reach depth reach_mm) on its box;
+    obj, when given, is the scene's object in another pose (rotated)."""
+    obj = scene.obj if obj is None else obj
     h_px, w_px = scene.size
     eff = scene.effects
     mpp = scene.mm_per_px
     margin = gel.margin_px(mpp, eff.spread)
     cx, cy = center
     if eff.crop:
-        r = scene.obj.radius_mm / mpp + 1.0
+        r = obj.radius_mm / mpp + 1.0
         x0, x1 = max(math.floor(cx - r), -margin), min(math.ceil(cx + r) + 1, w_px + margin)
         y0, y1 = max(math.floor(cy - r), -margin), min(math.ceil(cy + r) + 1, h_px + margin)
     else:
@@ -134,10 +157,10 @@ def _geometry(scene: Scene, center: tuple[float, float], reach_mm: float) -> _Ge
     COUNTS["geometry"] += 1
     xs = (np.arange(x0, x1, dtype=np.float64) - cx) * mpp
     ys = (np.arange(y0, y1, dtype=np.float64) - cy) * mpp
-    u, v = scene.obj.local(xs[None, :], ys[:, None])
-    height = scene.obj.shape(u, v)
-    bound = scene.obj.texture_bound_mm
-    if eff.texture and scene.obj.cls.texture is not None:
+    u, v = obj.local(xs[None, :], ys[:, None])
+    height = obj.shape(u, v)
+    bound = obj.texture_bound_mm
+    if eff.texture and obj.cls.texture is not None:
         if eff.crop:  # texture only where shape + texture can rise above -reach
             reach = height > -reach_mm - bound
             rows = np.flatnonzero(reach.any(axis=1))
@@ -148,7 +171,7 @@ def _geometry(scene: Scene, center: tuple[float, float], reach_mm: float) -> _Ge
             sub = (slice(None), slice(None))
         if sub is not None:
             COUNTS["texture"] += 1
-            height[sub] += scene.obj.texture(u[sub], v[sub])
+            height[sub] += obj.texture(u[sub], v[sub])
     return _Geometry(y0, x0, height)
 
 
@@ -210,6 +233,35 @@ def _solve(scene: Scene, geom: _Geometry, depth_mm: float, sensor_fields) -> _Sh
     return _Shaded(rows, cols, d, gx, gy, c, patch)
 
 
+def _pivot(scene: Scene, depth_mm: float) -> tuple[float, float]:
+    """Contact centre (px) of the first pose at depth_mm: centroid of the rigid overlap (the
+    object's centre when it touches nothing); rotations of the contact path turn about it."""
+    geom = _geometry(scene, scene.centers_px[0], depth_mm)
+    if geom.height is None:
+        return scene.centers_px[0]
+    ys, xs = np.nonzero(geom.height + depth_mm > 0.0)
+    if not xs.size:
+        return scene.centers_px[0]
+    return float(xs.mean()) + geom.x0, float(ys.mean()) + geom.y0
+
+
+def _posed(scene: Scene, t: int, pivot: tuple[float, float]) -> tuple[tuple[float, float],
+                                                                       ObjectInstance]:
+    """Object centre (px) and instance of frame t: frame 0's pose turned by the path's rotation
+    about the pivot (counter-clockwise in the image), then shifted by the frame's translation."""
+    assert scene.path is not None
+    theta = scene.path.rotations_deg[t]
+    (cx, cy), (x0, y0) = scene.centers_px[t], scene.centers_px[0]
+    if theta == 0.0:
+        return (cx, cy), scene.obj
+    a = math.radians(theta)
+    ox, oy = x0 - pivot[0], y0 - pivot[1]
+    # counter-clockwise on screen with y down the rows: (x, y) -> (cos x + sin y, -sin x + cos y)
+    rx, ry = math.cos(a) * ox + math.sin(a) * oy, -math.sin(a) * ox + math.cos(a) * oy
+    center = (cx - x0 + pivot[0] + rx, cy - y0 + pivot[1] + ry)
+    return center, dataclasses.replace(scene.obj, rotation_deg=scene.obj.rotation_deg - theta)
+
+
 def render(scene: Scene, capture: Capture | None = None,
            rng: np.random.Generator | None = None) -> Rendered:
     """Render a scene's frames (noise from rng; default camera settings) and its exact truth."""
@@ -230,10 +282,15 @@ def render(scene: Scene, capture: Capture | None = None,
     shaded: _Shaded | None = None
     last: tuple | None = None
     deepest = max(scene.depths_mm)
+    shots: list[tuple[np.ndarray | None, slice, slice]] = []
+    pivot = _pivot(scene, deepest) if scene.path is not None else c0
     for t in range(t_n):
         center, d = scene.centers_px[t], scene.depths_mm[t]
         if eff.motion or geom is None:
-            geom = _geometry(scene, center, d if eff.motion else deepest)
+            obj = None
+            if scene.path is not None:
+                center, obj = _posed(scene, t, pivot)
+            geom = _geometry(scene, center, d if eff.motion else deepest, obj)
         if eff.motion or (center, d) != last:
             shaded = _solve(scene, geom, d, fields)
             last = (center, d)
@@ -244,6 +301,20 @@ def render(scene: Scene, capture: Capture | None = None,
             grad[t, r, c, 0] = shaded.gx
             grad[t, r, c, 1] = shaded.gy
             contact[t, r, c] = shaded.contact
-        frames[t] = capture_frame(fields, capture, rng if eff.noise else None, shaded.patch,
-                                  shaded.rows, shaded.cols)
-    return Rendered(frames, depth, grad, contact, motion)
+        if scene.appearance is None:
+            frames[t] = capture_frame(fields, capture, rng if eff.noise else None,
+                                      shaded.patch, shaded.rows, shaded.cols)
+        else:  # captured below, through the sensor's gel pattern and camera
+            shots.append((shaded.patch, shaded.rows, shaded.cols))
+    surface = None
+    if scene.path is not None and scene.mechanics is not None:
+        from .mechanics import surface_displacement
+
+        surface = surface_displacement(contact, motion, pivot, scene.path, scene.mechanics,
+                                       scene.mm_per_px)
+    if scene.appearance is not None:
+        from .appearance import capture as appearance_capture
+
+        frames = appearance_capture(scene.appearance, fields, capture,
+                                    rng if eff.noise else None, shots, surface)
+    return Rendered(frames, depth, grad, contact, motion, surface)

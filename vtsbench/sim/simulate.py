@@ -19,6 +19,8 @@ from ..recordings.manifest import Circle, Entry, Labels, Manifest, Mount, Sessio
 from .objects import BALL_RADIUS_MM, OBJECTS
 from .optics import Capture
 from .plan import (
+    DEFAULT_GENERATOR,
+    GENERATORS,
     EntryPlan,
     entry_rng,
     make_plans,
@@ -28,6 +30,7 @@ from .plan import (
     size_problem,
     static_scene,
 )
+from .scene import Scene
 
 SENSOR_ID = "vtsbench-sim"
 FPS = 30.0
@@ -47,12 +50,13 @@ class Job:
     mm_per_px: float
     frames: int
     root: str
+    generator: int = 1
 
 
 def session_capture(seed: int, session: int) -> tuple[Capture, np.random.Generator]:
     """A session's camera settings and the generator of its background frame."""
     rng = session_rng(seed, session)
-    return Capture(read_noise=round(float(rng.uniform(*READ_NOISE_DN)), 4)), rng
+    return Capture(read_noise=round(float(rng.uniform(*READ_NOISE_DN)), 4), gel=session), rng
 
 
 def _set_threads() -> None:
@@ -75,8 +79,21 @@ def _centroid(mask: np.ndarray) -> tuple[float, float] | None:
     return _round(xs.mean(), 3), _round(ys.mean(), 3)
 
 
+def _path_meta(scene: Scene) -> dict:
+    """Generator-2 facts of a sequence for the manifest: speed profile, rotation over the
+    window (deg, counter-clockwise), contact made or lost."""
+    meta: dict = {}
+    if scene.path is not None:
+        meta["profile"] = scene.path.profile
+        meta["turn_deg"] = _round(scene.path.rotations_deg[-1], 4)
+        if scene.path.contact_change is not None:
+            meta["contact_change"] = scene.path.contact_change
+    return meta
+
+
 def run_job(job: Job) -> Entry:
     """Render one entry, write its frames and truth, and return its manifest entry."""
+    from ..labels import label_contact_window
     from ..recordings.media import write_png
     from ..recordings.truth import Truth, write_truth
     from .scene import render
@@ -85,22 +102,25 @@ def run_job(job: Job) -> Entry:
     root = Path(job.root)
     rng = entry_rng(job.seed, plan.kind, plan.number)
     motion = None
+    gen = job.generator
     if plan.kind == "static":
-        scene = static_scene(plan, rng, job.size, job.mm_per_px)
+        scene = static_scene(plan, rng, job.size, job.mm_per_px, gen)
     elif plan.kind == "sequence":
-        scene, motion = sequence_plan_scene(plan, rng, job.size, job.mm_per_px, job.frames)
+        scene, motion = sequence_plan_scene(plan, rng, job.size, job.mm_per_px, job.frames, gen)
     else:
-        scene = press_scene(rng, job.size, job.mm_per_px)
+        scene = press_scene(rng, job.size, job.mm_per_px, gen)
     rendered = render(scene, job.capture, rng)
     truth = f"truth/{plan.id}.npz"
     write_truth(root / truth, Truth(rendered.depth_mm, rendered.grad, rendered.contact,
                                     rendered.motion_px))
-    depth = float(scene.depths_mm[-1])
+    depth = max(0.0, float(scene.depths_mm[-1]))  # below 0: the object is above the gel
     contact_px = _centroid(rendered.contact[-1])
     obj = scene.obj
     meta = {"group": obj.cls.group, "rotation_deg": _round(obj.rotation_deg, 4),
             "scale": _round(obj.scale, 4),
             "start_px": [_round(scene.centers_px[0][0], 4), _round(scene.centers_px[0][1], 4)]}
+    if gen >= 2:  # generator 1 entries carry no mark (their bytes are kept)
+        meta["generator"] = gen
     if plan.kind == "sequence":
         assert motion is not None
         folder = f"sequences/{plan.id}"
@@ -108,11 +128,16 @@ def run_job(job: Job) -> Entry:
         digits = max(3, len(str(job.frames - 1)))
         for t, frame in enumerate(rendered.frames):
             write_png(root / folder / f"{t:0{digits}d}.png", frame)
-        lab = motion.label()
         meta["intended_state"] = plan.state
         meta["depth0_mm"] = float(motion.depth0_mm)
+        if gen >= 2:
+            lab = label_contact_window(motion.positions_mm(job.frames), scene.depths_mm,
+                                       rendered.contact.any(axis=(1, 2)).tolist())
+            meta.update(_path_meta(scene))
+        else:
+            lab = motion.label()
         labels = Labels(state=lab.state, direction=lab.direction,
-                        motion_mm=(float(motion.dx_mm), float(motion.dy_mm)),
+                        motion_mm=(float(lab.motion_mm[0]), float(lab.motion_mm[1])),
                         press_depth_mm=depth, contact_px=contact_px)
         return Entry(plan.id, "sequence", job.session_id, Source(folder, start=0, stop=job.frames),
                      object=plan.object, labels=labels, truth=truth, meta=meta)
@@ -129,7 +154,7 @@ def run_job(job: Job) -> Entry:
     return Entry(plan.id, "press", job.session_id, Source(path), object=plan.object,
                  labels=Labels(press_depth_mm=depth, contact_px=(circle.x, circle.y)),
                  ball_radius_mm=BALL_RADIUS_MM, circle=circle, truth=truth,
-                 meta={"depth_mm": depth})
+                 meta={"depth_mm": depth, **({"generator": gen} if gen >= 2 else {})})
 
 
 def _check_args(n_static: int, n_sequences: int, n_presses: int, n_objects: int,
@@ -211,8 +236,14 @@ def _run_jobs(jobs: list[Job], workers: int, progress: bool) -> list[Entry]:
 def simulate(out: str | Path, *, seed: int = 0, n_static: int = 30, n_sequences: int = 30,
              n_presses: int = 20, n_objects: int = 15, size: tuple[int, int] = (480, 640),
              frames: int = 8, n_sessions: int = 3, mm_per_px: float = 0.03, workers: int = 1,
-             overwrite: bool = False, progress: bool = False) -> Manifest:
-    """Write a synthetic recordings folder with exact ground truth; returns its manifest."""
+             overwrite: bool = False, progress: bool = False,
+             generator: int = DEFAULT_GENERATOR) -> Manifest:
+    """Write a synthetic recordings folder with exact ground truth; returns its manifest.
+
+    generator 1 is the first simulator (rigid shifts at constant speed, clean sensor), kept
+    byte for byte; 2 adds contact mechanics, uneven speed, contact made or lost, the gel's
+    fixed pattern and a real camera (docs/simulator.md).
+    """
     from ..atomic import staged_dir
     from ..recordings.manifest import save_manifest
     from ..recordings.media import write_png
@@ -222,6 +253,9 @@ def simulate(out: str | Path, *, seed: int = 0, n_static: int = 30, n_sequences:
     mm_per_px = float(mm_per_px)
     _check_args(n_static, n_sequences, n_presses, n_objects, size, frames, n_sessions,
                 mm_per_px, workers, seed)
+    if generator not in GENERATORS:
+        raise VtsError(f"--generator must be one of {', '.join(map(str, GENERATORS))}, "
+                       f"got {generator}")
     plans = make_plans(seed, n_static, n_sequences, n_presses, n_objects, n_sessions)
     with staged_dir(out, overwrite, marker="recordings.json") as stage:
         sessions, captures = [], []
@@ -230,22 +264,32 @@ def simulate(out: str | Path, *, seed: int = 0, n_static: int = 30, n_sequences:
             sid = f"s{s:02d}"
             capture, rng = session_capture(seed, s)
             (stage / sid).mkdir()
-            write_png(stage / sid / "background.png", capture_frame(fields, capture, rng))
+            if generator >= 2:  # the session's gel pattern and camera, as its entries show
+                from .appearance import Appearance, background
+
+                frame = background(Appearance(), fields, capture, rng)
+            else:
+                frame = capture_frame(fields, capture, rng)
+            write_png(stage / sid / "background.png", frame)
             captures.append(capture)
+            notes = f"simulated; read noise {capture.read_noise:g} DN"
+            if generator >= 2:  # generator 1 folders carry no mark (their bytes are kept)
+                notes = f"simulated, generator {generator}; read noise {capture.read_noise:g} DN"
             sessions.append(Session(sid, SENSOR_ID, size, (mm_per_px, mm_per_px), FPS,
-                                    f"{sid}/background.png", mount=Mount(),
-                                    notes=f"simulated; read noise {capture.read_noise:g} DN"))
+                                    f"{sid}/background.png", mount=Mount(), notes=notes))
         for sub, n in (("static", n_static), ("sequences", n_sequences), ("presses", n_presses),
                        ("truth", len(plans))):
             if n:
                 (stage / sub).mkdir()
         jobs = [Job(p, sessions[p.session].id, captures[p.session], seed, size, mm_per_px,
-                    frames, str(stage)) for p in plans]
+                    frames, str(stage), generator) for p in plans]
         entries = _run_jobs(jobs, workers, progress)
         used = ", ".join(c.name for c in OBJECTS[:n_objects])
         manifest = Manifest(
             sessions=sessions, entries=entries, name="vtsbench-sim",
-            description=(f"Synthetic visuo-tactile recordings (seed {seed}, {size[0]}x{size[1]} "
+            description=("Synthetic visuo-tactile recordings ("
+                         + (f"generator {generator}, " if generator >= 2 else "")
+                         + f"seed {seed}, {size[0]}x{size[1]} "
                          f"px at {mm_per_px:g} mm/px) with exact ground-truth depth in truth/. "
                          f"Objects: {used}."),
             created_by="vtsbench simulate")
