@@ -171,7 +171,7 @@ def test_one_frame_and_mixed_sizes_are_one_line_errors(tmp_path: Path) -> None:
     mixed = folder(tmp_path / "mixed", [window(shifts([0.5 * t for t in range(8)]))],
                    sizes_ok=False)
     res = runner.invoke(app, ["stats", str(mixed)])
-    assert res.exit_code == 2 and "different sizes" in res.output
+    assert res.exit_code == 2 and "frames of two sizes: 000.png is" in res.output
     assert res.output.startswith("error: ") and len(res.output.strip().splitlines()) == 1
 
 

@@ -87,7 +87,8 @@ def regular_file(path: str | os.PathLike, what: str = "file",
     except OSError as e:
         raise VtsError(f"cannot read {what} ({e.strerror or e})", path) from None
     if stat.S_ISDIR(st.st_mode):
-        raise VtsError(f"is a folder, not a {what}", path)
+        article = "an" if what[:1].lower() in "aeiou" else "a"
+        raise VtsError(f"is a folder, not {article} {what}", path)
     if not stat.S_ISREG(st.st_mode):
         raise VtsError(f"not a regular file but a pipe, device or socket ({what} expected)", path)
     if st.st_size > limit:

@@ -65,7 +65,7 @@ def read_parquet(path: Path, columns: list[str] | None = None) -> Any:
 
     from ..jsonio import regular_file
 
-    regular_file(path, "index file")
+    regular_file(path, "index")
     try:
         return pq.read_table(path, columns=columns)
     except (pa.ArrowException, OSError, KeyError, ValueError) as e:
@@ -80,7 +80,7 @@ def read_index(path: Path, kind: str) -> list[SampleMeta]:
 
     from ..jsonio import regular_file
 
-    regular_file(path, "index file")  # a folder, a FIFO or a device is said as such
+    regular_file(path, "index")  # a folder, a FIFO or a device is said as such
     try:
         table = pq.read_table(path)
     except (pa.ArrowException, OSError) as e:

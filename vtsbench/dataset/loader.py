@@ -570,7 +570,7 @@ def _read_index(loc: Location, kind: str, info: DatasetInfo) -> pa.Table:
 
     rel = f"index/{kind}.parquet"
     if not loc.remote:
-        regular_file(loc.path(rel), "index file")  # a folder, a FIFO or a device is said as such
+        regular_file(loc.path(rel), "index")  # a folder, a FIFO or a device is said as such
     try:
         if loc.remote:
             table = pq.read_table(pa.BufferReader(loc.read_bytes(rel, "index not found")))

@@ -69,14 +69,11 @@ def sample(windows: list[Window], n: int) -> list[Window]:
 
 
 def read_window(root: Path, w: Window) -> np.ndarray:
-    """A window's frames, (T, H, W, 3) uint8; frames of different sizes are a one-line error."""
+    """A window's frames, (T, H, W, 3) uint8 (frames of two sizes in one sequence are the
+    reader's one-line error, naming both)."""
     from ..recordings.media import read_frames
 
-    try:
-        return read_frames(root / w.path, w.start, w.stop)
-    except ValueError:  # np.stack of frames of different sizes
-        raise VtsError(f"frames [{w.start}, {w.stop}) of entry {w.entry} have different sizes: "
-                       "statistics need frames of one size", root / w.path) from None
+    return read_frames(root / w.path, w.start, w.stop)
 
 
 class References:
