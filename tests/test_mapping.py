@@ -173,3 +173,18 @@ def test_mlp_without_torch_says_so(monkeypatch) -> None:
     c = np.zeros((10, 3), np.float32)
     with pytest.raises(VtsError, match=r"needs torch .*lut and poly do not"):
         fit_mapping("mlp", c, c[:, :2], c[:, :2])
+
+
+@pytest.mark.parametrize("degree,pos_degree", [(3, 2), (2, 0), (4, 1)])
+def test_poly_row_layout_predict_equals_the_chunked_form(degree, pos_degree) -> None:
+    """PolyMapping.predict (monomials as rows, one product per chunk, cached position rows)
+    gives the numbers of the per-sample form predict_flat, over several frames and sizes."""
+    from vtsbench.depth.mapping import Mapping, PolyMapping, exponents
+
+    rng = np.random.default_rng(degree)
+    t = exponents(degree, 3).shape[0] * exponents(pos_degree, 2).shape[0]
+    m = PolyMapping({"degree": degree, "pos_degree": pos_degree, "ridge": 1e-6, "terms": t},
+                    {"poly.coef": rng.normal(0, 0.1, (t, 2)).astype(np.float32)})
+    for shape in ((2, 300, 250, 3), (37, 41, 3)):
+        d = rng.normal(0, 20, shape).astype(np.float32)
+        np.testing.assert_allclose(m.predict(d), Mapping.predict(m, d), rtol=1e-5, atol=1e-6)

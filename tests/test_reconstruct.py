@@ -198,3 +198,24 @@ def test_cli_depth_bad_calibration(cal_file, tmp_path, what) -> None:
     res = CliRunner().invoke(app, ["depth", str(tmp_path / "a.png"), "--calibration", str(bad)])
     assert res.exit_code == 2 and len(res.stderr.strip().splitlines()) == 1
     assert "Traceback" not in res.output
+
+
+@pytest.mark.parametrize("method", ["lut", "poly"])
+def test_fast_numpy_path_gives_the_general_paths_numbers(tmp_path_factory, method) -> None:
+    """reconstruct's frame-at-a-time numpy path (the build's DepthMaker) and the lut's one-take
+    lookup (LutMapping.relative) give, bit for bit, what the general path computes: predict,
+    minus the zero map, still pixels at 0, then poisson.integrate."""
+    from vtsbench.depth.mapping import Mapping
+    from vtsbench.depth.poisson import integrate
+
+    cal = fitted(tmp_path_factory, method).calibration
+    frames = np.stack([h.press.image for h in fitted(tmp_path_factory, method).held_out]
+                      + [cal.background])
+    diff = cal.difference(frames)
+    general = Mapping.relative(cal.mapping, diff, cal.zero_map)
+    assert np.array_equal(cal.gradients(frames), general)
+    for solver in ("dct", "dst"):
+        want = integrate(general[..., 0], general[..., 1], method=solver,
+                         mm_per_px=cal.mm_per_px, dtype=np.float32)
+        assert np.array_equal(reconstruct(frames, cal, solver=solver), want), solver
+    assert not np.any(reconstruct(frames[-1], cal))  # the background: exactly flat

@@ -21,7 +21,7 @@ MPP = 0.1
 #: Nothing but the option under test: no pattern, no compression, no jump, no drift.
 BARE = Appearance(marker_share=0.0, border_darkness=(0.0, 0.0), dust_per_cm2=0.0, scratches=0,
                   imprint_gain=(1.0, 1.0), jpeg_quality=None, wb_jump_share=0.0, drift=0.0,
-                  refresh=0.0, noise_scale=1.0)
+                  refresh=0.0, noise_scale=1.0, keyframe_interval=None, grain=0.0)
 NO_PATCH = (None, slice(0, 0), slice(0, 0))
 
 
@@ -144,7 +144,7 @@ def test_drift_is_bounded_and_starts_at_one() -> None:
 
 
 def test_marker_gels_alternate_and_background_shows_the_pattern() -> None:
-    app = Appearance()
+    app = Appearance(marker_share=0.5)
     assert [has_markers(app, g) for g in range(6)].count(True) == 3
     marker_gel = next(g for g in range(6) if has_markers(app, g))
     plain = dataclasses.replace(app, jpeg_quality=None)
@@ -165,14 +165,58 @@ def test_scene_without_appearance_renders_the_same_bytes() -> None:
         "7801b6cbfe1dd63c47c95971df6f3a3230e239ea8735686f3e78545393ffbc2c"
 
 
-def test_simulated_session_background_has_its_gels_pattern(tmp_path) -> None:
+def test_a_generator_2_folder_is_one_sensor(tmp_path) -> None:
+    """Every session of a folder wears the folder's gel (number: the seed; markers or plain as
+    asked) with one imprint gain, so presses and entries share the depth calibration."""
+    from vtsbench.errors import VtsError
+    from vtsbench.recordings.manifest import load_manifest
     from vtsbench.recordings.media import read_image
+    from vtsbench.sim.appearance import sensor_appearance
     from vtsbench.sim.simulate import simulate
 
-    simulate(tmp_path / "sim", seed=1, n_static=0, n_sequences=0, n_presses=0, n_objects=4,
-             size=SIZE, frames=2, n_sessions=2, mm_per_px=MPP, generator=2)
-    for gel in (0, 1):
-        bg = _grey(read_image(tmp_path / "sim" / f"s{gel:02d}" / "background.png"))
-        pattern = gel_pattern(Appearance(), gel, SIZE[0], SIZE[1], MPP)
-        flat = _grey(capture(BARE, _fields(), Capture(), None, [NO_PATCH], None)[0])
-        assert np.corrcoef((bg / flat).ravel(), pattern.still.ravel())[0, 1] > 0.8
+    flat = _grey(capture(BARE, _fields(), Capture(), None, [NO_PATCH], None)[0])
+    for gel in ("markers", "plain"):
+        out = tmp_path / gel
+        simulate(out, seed=5, n_static=0, n_sequences=0, n_presses=0, n_objects=4, size=SIZE,
+                 frames=2, n_sessions=3, mm_per_px=MPP, generator=2, gel=gel)
+        pattern = gel_pattern(sensor_appearance(gel), 5, SIZE[0], SIZE[1], MPP)
+        assert pattern.markers == (gel == "markers")
+        notes = {s.notes.split("; read noise")[0] for s in load_manifest(out).sessions}
+        assert len(notes) == 1 and f"{gel} gel, imprint gain" in notes.pop()
+        bgs = [_grey(read_image(out / f"s{k:02d}" / "background.png")) / flat for k in range(3)]
+        for bg in bgs:
+            assert np.corrcoef(bg.ravel(), pattern.still.ravel())[0, 1] > 0.8
+    with pytest.raises(VtsError, match="--gel"):
+        simulate(tmp_path / "bad", n_static=1, n_sequences=0, n_presses=0, size=SIZE,
+                 mm_per_px=MPP, generator=2, gel="dots")
+    with pytest.raises(VtsError, match="--gel needs --generator 2"):
+        simulate(tmp_path / "bad", n_static=1, n_sequences=0, n_presses=0, size=SIZE,
+                 mm_per_px=MPP, generator=1, gel="plain")
+
+
+def test_key_frames_send_the_whole_frame() -> None:
+    """A key frame renews every block (and its noise); between key frames still blocks are
+    kept; a take of 8 frames holds a key frame after its first in 7 of 12 streams."""
+    still = capture(BARE, _fields(), Capture(read_noise=1.5), np.random.default_rng(0),
+                    [NO_PATCH] * 6, None)
+    out = compress(still, 70, 2.5, 0.0, None, keyframes=(4,))
+    assert (out[1] == out[3]).all() and (out[5] == out[4]).all()
+    changed = np.abs(out[4].astype(int) - out[3].astype(int)).max(axis=-1)
+    assert changed.reshape(6, 16, 8, 16).max(axis=(1, 3)).astype(bool).mean() > 0.9
+    app = dataclasses.replace(BARE, keyframe_interval=12)
+    keys = [draw_take(app, np.random.default_rng(i), 8).keyframes for i in range(600)]
+    assert all(len(k) <= 1 and all(1 <= t < 8 for t in k) for k in keys)
+    assert np.mean([bool(k) for k in keys]) == pytest.approx(7 / 12, abs=0.06)
+    assert draw_take(BARE, np.random.default_rng(0), 8).keyframes == ()
+
+
+def test_grain_is_a_fixed_texture_of_the_gel() -> None:
+    """The coating's grain multiplies the surface layer by 1 + grain * N(0, 1), the same in
+    every call for a gel."""
+    a = gel_pattern(dataclasses.replace(BARE, grain=0.0), 2, SIZE[0], SIZE[1], MPP)
+    b = gel_pattern(dataclasses.replace(BARE, grain=0.01), 2, SIZE[0], SIZE[1], MPP)
+    assert (a.surface == 1.0).all()
+    assert np.std(b.surface) == pytest.approx(0.01, rel=0.1)
+    c = gel_pattern(dataclasses.replace(BARE, grain=0.01, pattern_seed=0), 2, SIZE[0], SIZE[1],
+                    MPP)
+    assert (c.surface == b.surface).all()

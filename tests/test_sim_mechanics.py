@@ -24,6 +24,7 @@ from vtsbench.sim.mechanics import (
     contact_path,
     progress,
     step_weights,
+    surface_displacement,
     surface_field,
 )
 from vtsbench.sim.objects import BALL, KEY, random_instance
@@ -190,8 +191,12 @@ def test_speed_profiles() -> None:
         w = step_weights(mech, rng, 7)[1]
         largest.append(w.max())
         cv.append(w.std() / w.mean())
-    # the real windows' medians: largest step 0.31 [0.25-0.50], speed CV 0.62-0.78
-    assert 0.27 <= np.median(largest) <= 0.40 and 0.55 <= np.median(cv) <= 0.85
+    # the commanded steps of the defaults (20,000 draws: largest 0.19 [0.14-0.24], CV 0.23
+    # [0-0.40]): uneven, but less than the real windows measure (0.32-0.34, CV 0.71-0.78),
+    # because `vtsbench stats` adds the flow's error and contact made or lost to both; the
+    # defaults are set on what it measures on simulated windows (docs/simulator.md)
+    assert 0.16 <= np.median(largest) <= 0.22 and 0.15 <= np.median(cv) <= 0.30
+    assert np.percentile(largest, 75) > 0.22  # a quarter of the windows carry a jerk
     p = progress(np.array([0.0, 0.7, 0.3]))
     assert p == (0.0, 0.0, 0.7, 1.0)
 
@@ -221,9 +226,11 @@ def test_generator_2_windows_make_or_lose_contact_and_keep_their_state() -> None
         state = ("press", "slip")[i % 2]
         plan = EntryPlan("sequence", i + 1, 0, "sphere", state)
         rng = np.random.default_rng([9, i])
-        scene, motion = sequence_plan_scene(plan, rng, (64, 80), 0.1, 6, generator=2)
+        mech = Mechanics(contact_change_share=0.5)
+        scene, motion = sequence_plan_scene(plan, rng, (64, 80), 0.1, 6, generator=2,
+                                            mechanics=mech)
         scene = dataclasses.replace(scene, appearance=None)
-        assert scene.mechanics == Mechanics() and scene.path is not None
+        assert scene.mechanics == mech and scene.path is not None
         r = render(scene, rng=rng)
         touching = r.contact.any(axis=(1, 2))
         change = scene.path.contact_change
@@ -254,3 +261,63 @@ def test_generator_2_is_written_into_the_manifest(tmp_path: Path) -> None:
     assert all(e.meta["generator"] == 2 for e in m.entries)
     moving = [e for e in m.entries if e.meta.get("intended_state") in ("press", "slip")]
     assert moving and all(e.meta["profile"] in PROFILES for e in moving)
+
+
+def test_generator_2_draws_slips_from_its_own_range() -> None:
+    """Generator 2's slip distances lie in SLIP_RANGE_V2_MM; generator 1's draws are as before."""
+    from vtsbench.sim.motion import SLIP_RANGE_MM, SLIP_RANGE_V2_MM, sample_motion
+
+    for gen, (lo, hi) in ((1, SLIP_RANGE_MM), (2, SLIP_RANGE_V2_MM)):
+        d = [math.hypot(m.dx_mm, m.dy_mm) for m in
+             (sample_motion("slip", np.random.default_rng(i), (0.2, 0.5), gen)
+              for i in range(200))]
+        assert lo <= min(d) and max(d) <= hi and max(d) > lo + 0.8 * (hi - lo) / 2
+    a = sample_motion("slip", np.random.default_rng(3), (0.2, 0.5))
+    assert a == sample_motion("slip", np.random.default_rng(3), (0.2, 0.5), 1)
+
+
+def test_a_preloaded_window_starts_with_the_gel_displaced() -> None:
+    """From the unloaded gel, a preloaded first frame is already sheared (the pattern is drawn
+    there); from frame 0 (the truth), the first frame is zero."""
+    mech = Mechanics(preload=(0.8, 0.8))
+    rng = np.random.default_rng(1)
+    prog = tuple(np.linspace(0.0, 1.0, 4))
+    path = contact_path(mech, rng, prog, (20.0, 0.0), 0.05)
+    assert path.shear_px[0][0] > 0.0
+    contact = np.zeros((4, 60, 80), bool)
+    contact[:, 20:40, 20:40] = True
+    motion = np.array([(20.0 * p, 0.0) for p in prog], np.float32)
+    rest = surface_displacement(contact, motion, (30.0, 30.0), path, mech, 0.05,
+                                from_rest=True)
+    rel = surface_displacement(contact, motion, (30.0, 30.0), path, mech, 0.05)
+    assert rest[0, 30, 30, 0] == pytest.approx(path.shear_px[0][0], rel=0.05)
+    assert not rel[0].any()
+    assert np.allclose(rel[3], rest[3] - rest[0], atol=1e-4)
+
+
+def test_an_effect_switched_off_leaves_the_other_draws() -> None:
+    """Rotation 0 gives no rotation and the same shear as the default path of the same draws
+    (what the ablation benchmark relies on)."""
+    prog = tuple(np.linspace(0.0, 1.0, 6))
+    on = contact_path(Mechanics(), np.random.default_rng(4), prog, (30.0, 5.0), 0.03)
+    off = contact_path(Mechanics(rotation_deg=(0.0, 0.0)), np.random.default_rng(4), prog,
+                       (30.0, 5.0), 0.03)
+    assert any(on.rotations_deg) and not any(off.rotations_deg) and not any(off.twist_deg)
+    assert off.shear_px == on.shear_px and off.stick == on.stick
+
+
+def test_a_held_object_shears_the_gel_the_same_in_every_frame() -> None:
+    """A generator-2 held sequence: no motion, a constant gel shear (its pattern displaced
+    against the unloaded gel), nothing moving from frame 0; with held_shear off, none."""
+    plan = EntryPlan("sequence", 1, 0, "sphere", "static")
+    scene, motion = sequence_plan_scene(plan, np.random.default_rng(2), (64, 80), 0.1, 4,
+                                        generator=2, mechanics=Mechanics(preload=(0.8, 0.8)))
+    assert motion.label().state == "static" and not scene.effects.motion
+    assert scene.path is not None and scene.path.profile == "held"
+    assert len(set(scene.path.shear_px)) == 1 and math.hypot(*scene.path.shear_px[0]) > 0.1
+    r = render(dataclasses.replace(scene, appearance=None), rng=np.random.default_rng(0))
+    assert r.surface_px is not None and not r.surface_px.any()
+    off = Mechanics(preload=(0.8, 0.8), held_shear=False)
+    scene, _ = sequence_plan_scene(plan, np.random.default_rng(2), (64, 80), 0.1, 4,
+                                   generator=2, mechanics=off)
+    assert scene.path is not None and scene.path.shear_px[0] == (0.0, 0.0)

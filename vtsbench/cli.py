@@ -249,7 +249,10 @@ def simulate(
         help="Simulator version: 1 (default) the first simulator (rigid shifts at constant "
              "speed, clean sensor), the same bytes as before for a seed; 2 partial slip, "
              "rotation, uneven speed, contact made or lost, the gel's fixed pattern and a real "
-             "camera (being calibrated to real video: docs/simulator.md).")] = 1,
+             "camera, calibrated to real video (docs/simulator.md).")] = 1,
+    gel: Annotated[Literal["markers", "plain"] | None, _choice(
+        help="Generator 2: the sensor's gel, 'markers' (a printed marker grid) or 'plain' "
+             "(default); every session of the folder wears it.")] = None,
 ) -> None:
     """Write a synthetic recordings folder with exact ground-truth depth and gradients.
 
@@ -260,7 +263,7 @@ def simulate(
     m = _run(run_sim, out, seed=seed, n_static=static, n_sequences=sequences, n_presses=presses,
              n_objects=objects, size=_parse_size(size), frames=frames, n_sessions=sessions,
              mm_per_px=mm_per_px, workers=workers, overwrite=overwrite, progress=not quiet,
-             generator=generator)
+             generator=generator, gel=gel)
     typer.echo(f"wrote {len(m.entries)} entries in {len(m.sessions)} sessions to {out}")
 
 
@@ -650,6 +653,12 @@ def calibrate(
     circles: Annotated[Literal["label", "detect"], _choice(
         help="label: use labelled circles, detect the others; detect: detect every circle "
              "(labels only compared, in report.json).")] = "label",
+    markers: Annotated[Literal["auto", "off"], _choice(
+        help="auto: a marker grid found in the background is left out of the fit and filled "
+             "before integration; off: never.")] = "auto",
+    rim_cv: Annotated[bool, typer.Option(
+        "--rim-cv", help="Choose the rim shrink by cross-validation over the training presses "
+                         "(16 extra fits).")] = False,
 ) -> None:
     """Fit a colour-to-gradient calibration from ball presses, score held-out presses.
 
@@ -680,7 +689,7 @@ def calibrate(
                             device=device, options={k: v for k, v in given.items()
                                                     if v is not None},
                             log=lambda m: typer.echo(m, err=m.startswith("warning")),
-                            circles=circles)
+                            circles=circles, markers=markers, rim_cv=rim_cv)
         save_calibration(run.calibration, out)
         folder = report if report is not None else out.with_name(out.name + ".report")
         png, _ = write_report(run, folder)

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..errors import VtsError
 from .mapping import METHODS, Mapping, fit_mapping, mapping_from_arrays
+from .markers import MarkerSpec, detect_markers, fill_gradients, marker_mask
 from .sphere import Rim, ball_radius_px, circle_doubts, detect_circle, sphere_fields
 
 FORMAT = "vtsbench.calibration"
@@ -72,6 +73,8 @@ class Calibration:
     rim: Rim = field(default_factory=Rim)
     blur_px: float = BLUR_PX
     colour_limit_dn: float = 255.0
+    #: The gel's marker dots (markers.py), filled in the gradients; None: a markerless gel.
+    markers: MarkerSpec | None = None
     fit: dict[str, Any] = field(default_factory=dict)
     n_presses: int = 0
     created_by: str = "vtsbench calibrate"
@@ -100,13 +103,19 @@ class Calibration:
         images = np.asarray(images)
         self._check_shape(images.shape)
         diff = self.difference(images)
-        g = self.mapping.predict(diff)
-        g -= self.zero_map
-        # Three elementwise compares: 3x faster than diff.any(axis=-1), a reduction over 3.
-        still = (diff[..., 0] == 0) & (diff[..., 1] == 0) & (diff[..., 2] == 0)
-        if still.any():
-            g[still] = 0.0
+        g = self.mapping.relative(diff, self.zero_map)
+        if self.markers is not None:
+            g = self.fill_markers(images, g)
         return g
+
+    def fill_markers(self, images: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """The gradients with the marker dots of the frames and of the background filled from
+        the gel around them (markers.py); unchanged on a markerless gel."""
+        spec = self.markers
+        if spec is None:
+            return g
+        mask = marker_mask(images, spec, self.background)
+        return fill_gradients(g, mask)
 
     def gradients_torch(self, images: Any) -> Any:
         """The same on a torch tensor (..., H, W, 3) of RGB values, on the tensor's device."""
@@ -124,7 +133,11 @@ class Calibration:
             diff = _blur_torch(diff, self.blur_px)
         diff = diff.clamp(-self.colour_limit_dn, self.colour_limit_dn)
         g = self.mapping.predict_torch(diff) - zero
-        return torch.where((diff != 0).any(dim=-1, keepdim=True), g, torch.zeros_like(g))
+        g = torch.where((diff != 0).any(dim=-1, keepdim=True), g, torch.zeros_like(g))
+        if self.markers is not None:  # the dots are found and filled on the CPU
+            filled = self.fill_markers(images.cpu().numpy(), g.cpu().numpy())
+            g = torch.from_numpy(filled).to(dev)
+        return g
 
     def _check_shape(self, shape: tuple[int, ...]) -> None:
         if len(shape) < 3 or shape[-1] != 3:
@@ -150,7 +163,9 @@ class Calibration:
             "features": {"colour": "RGB difference to the background, DN",
                          "position": "x, y of the pixel centre normalised to [-1, 1]",
                          "blur_px": float(self.blur_px),
-                         "colour_limit_dn": float(self.colour_limit_dn)},
+                         "colour_limit_dn": float(self.colour_limit_dn),
+                         **({} if self.markers is None
+                            else {"markers": self.markers.to_dict()})},
             "rim": self.rim.to_dict(),
             "fit": self.fit,
             "n_presses": int(self.n_presses),
@@ -318,8 +333,23 @@ def load_calibration(path: str | Path, *, sensor: str | None = None,
         mm_per_px=(float(meta["mm_per_px"][0]), float(meta["mm_per_px"][1])),
         ball_radius_mm=float(meta["ball_radius_mm"]), rim=Rim.from_dict(meta["rim"]),
         blur_px=float(feats["blur_px"]), colour_limit_dn=float(feats["colour_limit_dn"]),
+        markers=_marker_spec(feats.get("markers"), path),
         fit=meta["fit"], n_presses=int(meta["n_presses"]), created_by=meta["created_by"],
         vtsbench_version=meta["vtsbench_version"], format_version=ver)
+
+
+def _marker_spec(d: Any, path: Path) -> MarkerSpec | None:
+    """The stored marker settings, or None; a one-line error when they are damaged."""
+    if d is None:
+        return None
+    try:
+        spec = MarkerSpec.from_dict(d)
+    except (KeyError, TypeError, ValueError) as e:
+        raise VtsError(f"corrupt calibration metadata: features.markers ({e})", path) from None
+    if not (spec.diameter_px > 0 and spec.window_px >= 3 and spec.window_px % 2 == 1
+            and 0 < spec.contrast < 1 and spec.grow_px >= 0):
+        raise VtsError("corrupt calibration metadata: features.markers out of range", path)
+    return spec
 
 
 # -- calibrating -----------------------------------------------------------------------------
@@ -365,6 +395,8 @@ class CalibrationRun:
     train_examples: list[HeldOut] = field(default_factory=list)
     #: Per press: the circle used (labelled or detected), the other one, status and reasons.
     presses: list[dict[str, Any]] = field(default_factory=list)
+    #: Every press frame by id, used or dropped (the report's contact sheet draws them).
+    frames: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
     def dropped(self) -> list[str]:
@@ -586,7 +618,8 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
     radii = sorted({p.ball_radius_mm for p in presses})
     setup = {"root": root, "sensor": sensors[0], "shape": shape, "mm_per_px": scale,
              "background": bg_how, "lost": lost, "n_entries": len(entries), "presses": record,
-             "ball_radius_mm": radii[0] if radii else float(entries[0].ball_radius_mm)}
+             "ball_radius_mm": radii[0] if radii else float(entries[0].ball_radius_mm),
+             "frames": {e.id: img for e, img in zip(entries, frames, strict=True)}}
     if len(radii) > 1:
         warnings.append(f"presses of several ball radii ({radii} mm); the file records "
                         f"{radii[0]} mm")
@@ -594,9 +627,11 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
 
 
 def training_samples(presses: list[Press], background: np.ndarray, scale: tuple[float, float],
-                     rim: Rim, blur_px: float, rng: np.random.Generator
+                     rim: Rim, blur_px: float, rng: np.random.Generator,
+                     markers: MarkerSpec | None = None
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(colour (N, 3), xy (N, 2), target (N, 2), is_cap (N,)) from the presses' labelled pixels."""
+    """(colour (N, 3), xy (N, 2), target (N, 2), is_cap (N,)) from the presses' labelled pixels;
+    with markers, the marker dots of each press and of the background are left out."""
     from .mapping import norm_xy
 
     h, w = background.shape[:2]
@@ -605,7 +640,10 @@ def training_samples(presses: list[Press], background: np.ndarray, scale: tuple[
     for p in presses:
         f = sphere_fields((h, w), p.x, p.y, p.r, p.ball_radius_mm, scale, rim)
         diff = colour_difference(p.image, background, blur_px)
+        dots = None if markers is None else marker_mask(p.image, markers, background)
         for sel, n_max, is_cap in ((f.trusted, CAP_SAMPLES, True), (f.flat, FLAT_SAMPLES, False)):
+            if dots is not None:
+                sel = sel & ~dots
             ys, xs = np.nonzero(sel)
             if ys.size > n_max:
                 k = np.sort(rng.choice(ys.size, n_max, replace=False))
@@ -621,12 +659,20 @@ def training_samples(presses: list[Press], background: np.ndarray, scale: tuple[
 
 def fit_calibration(train: list[Press], background: np.ndarray, setup: dict[str, Any],
                     method: str, *, rim: Rim, blur_px: float, rng: np.random.Generator,
-                    options: dict[str, Any] | None = None
+                    options: dict[str, Any] | None = None, markers: str = "auto"
                     ) -> tuple[Calibration, tuple[np.ndarray, ...]]:
     """A calibration fitted to training presses (setup: `load_presses`'s), with its samples
-    (colour, xy, target, is_cap): labels, colour clip, mapping and zero map."""
+    (colour, xy, target, is_cap): labels, colour clip, mapping and zero map.
+
+    markers: "auto" finds a marker grid in the background (markers.detect_markers) and, when
+    there is one, leaves the dots out of the samples and fills them at run time; "off" never."""
     scale = setup["mm_per_px"]
-    colour, xy, target, is_cap = training_samples(train, background, scale, rim, blur_px, rng)
+    if markers not in ("auto", "off"):
+        raise VtsError(f"--markers must be auto or off, got {markers!r}")
+    spec = detect_markers(background, scale, grow_px=max(1, math.ceil(2 * blur_px))) \
+        if markers == "auto" else None
+    colour, xy, target, is_cap = training_samples(train, background, scale, rim, blur_px, rng,
+                                                  spec)
     limit = float(min(255.0, np.percentile(np.abs(colour), 99.9) * 1.05 + 1.0))
     np.clip(colour, -limit, limit, out=colour)
     mapping = fit_mapping(method, colour, xy, target, **dict(options or {}))
@@ -635,8 +681,42 @@ def fit_calibration(train: list[Press], background: np.ndarray, setup: dict[str,
     cal = Calibration(mapping=mapping, background=background, zero_map=zero,
                       sensor=setup["sensor"], mm_per_px=scale,
                       ball_radius_mm=setup["ball_radius_mm"], rim=rim, blur_px=blur_px,
-                      colour_limit_dn=limit, n_presses=len(train))
+                      colour_limit_dn=limit, n_presses=len(train), markers=spec)
     return cal, (colour, xy, target, is_cap)
+
+
+#: Rim shrink settings (shrink_px, shrink_frac) that `rim_cv` chooses among.
+RIM_CANDIDATES = ((2.0, 0.06), (1.0, 0.03), (0.5, 0.03), (0.0, 0.0))
+
+
+def choose_rim(train: list[Press], background: np.ndarray, setup: dict[str, Any], method: str,
+               *, rim: Rim, blur_px: float, seed: int, options: dict[str, Any] | None = None,
+               markers: str = "auto", folds: int = 4) -> tuple[Rim, dict[str, float]]:
+    """The rim shrink (RIM_CANDIDATES, the rest of `rim` kept) with the lowest mean
+    plane-aligned RMSE in `folds`-fold cross-validation over the training presses alone, and
+    each candidate's score ("shrink_px/shrink_frac" -> mm)."""
+    from dataclasses import replace
+
+    k = max(2, min(int(folds), len(train)))
+    fold = np.arange(len(train)) % k
+    scores: dict[str, float] = {}
+    best: tuple[float, Rim] | None = None
+    for px, frac in RIM_CANDIDATES:
+        cand = replace(rim, shrink_px=px, shrink_frac=frac)
+        errs = []
+        for f in range(k):
+            fit_on = [p for p, g in zip(train, fold, strict=True) if g != f]
+            cal, _ = fit_calibration(fit_on, background, setup, method, rim=cand,
+                                     blur_px=blur_px, rng=np.random.default_rng(seed),
+                                     options=options, markers=markers)
+            errs += [evaluate_press(cal, p).errors["plane_aligned_rmse_mm"]
+                     for p, g in zip(train, fold, strict=True) if g == f]
+        score = float(np.nanmean(errs))
+        scores[f"{px:g}/{frac:g}"] = score
+        if best is None or score < best[0]:
+            best = (score, cand)
+    assert best is not None
+    return best[1], scores
 
 
 def evaluate_press(cal: Calibration, press: Press, *, solver: str = "dct",
@@ -688,12 +768,16 @@ def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = 
               estimate_background: bool = False, rim: Rim | None = None,
               blur_px: float = BLUR_PX, solver: str = "dct", device: str | None = "auto",
               options: dict[str, Any] | None = None,
-              log: Callable[[str], None] | None = None, circles: str = "label") -> CalibrationRun:
+              log: Callable[[str], None] | None = None, circles: str = "label",
+              markers: str = "auto", rim_cv: bool = False) -> CalibrationRun:
     """Fit a calibration from the presses of a recordings folder (see the module doc).
 
     holdout: presses kept out of training and scored (default: a fifth, none below 4 presses).
     options: the method's parameters (lut: bins, cells; poly: degree; mlp: width, depth,
-    epochs, lr, batch_size).
+    epochs, lr, batch_size). markers: "auto" (a marker grid found in the background is left
+    out of the fit and filled before integration, see markers.py) or "off". rim_cv: choose
+    the rim shrink by cross-validation over the training presses (`choose_rim`; the held-out
+    presses take no part), at 4 x 4 extra fits.
     """
     t0 = time.perf_counter()
     say = log or (lambda _msg: None)
@@ -728,9 +812,20 @@ def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = 
     if method == "mlp":
         opts.setdefault("seed", seed)
         opts.setdefault("device", device)
+    rim_scores = None
+    if rim_cv:
+        rim, rim_scores = choose_rim(train, bg, setup, method, rim=rim, blur_px=blur_px,
+                                     seed=seed, options=opts, markers=markers)
+        say("rim shrink by cross-validation over the training presses: " + ", ".join(
+            f"{k} {v:.4f} mm" for k, v in rim_scores.items()) + f"; chose "
+            f"{rim.shrink_px:g} px / {rim.shrink_frac:g}")
     t_fit = time.perf_counter()
     cal, (colour, xy, target, is_cap) = fit_calibration(train, bg, setup, method, rim=rim,
-                                                        blur_px=blur_px, rng=rng, options=opts)
+                                                        blur_px=blur_px, rng=rng, options=opts,
+                                                        markers=markers)
+    if cal.markers is not None:
+        say(f"marker gel: {cal.markers.n_dots} dots of {cal.markers.diameter_px:.1f} px in the "
+            "background, left out of the fit and filled before integration")
     fit_s = time.perf_counter() - t_fit
     mapping, zero, (h, w) = cal.mapping, cal.zero_map, setup["shape"]
     # Training error as the file will answer: f(c, x, y) - f(0, x, y) at the samples.
@@ -754,6 +849,7 @@ def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = 
         "dropped_ids": list(setup["lost"]),
         "circles_detected": sum(p.circle_source == "detected" for p in presses),
         "fit_seconds": round(fit_s, 3),
+        **({} if rim_scores is None else {"rim_cv_mm": rim_scores}),
         "holdout": [{"id": r.press.id, "reference": r.reference,
                      **{kk: _num(r.errors[kk]) for kk in keys}} for r in results],
         "holdout_mean": {kk: _num(float(np.mean([r.errors[kk] for r in results])))
@@ -766,7 +862,7 @@ def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = 
     examples = [] if results else [evaluate_press(cal, p, solver=solver, held_out=False)
                                    for p in train[:3]]
     return CalibrationRun(cal, results, warnings, time.perf_counter() - t0, examples,
-                          setup["presses"])
+                          setup["presses"], setup["frames"])
 
 
 def _num(v: float) -> float | None:

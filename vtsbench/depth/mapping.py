@@ -79,6 +79,17 @@ class Mapping:
         """The same on a torch tensor (..., H, W, 3) float32, on the tensor's device."""
         raise NotImplementedError
 
+    def relative(self, diff: np.ndarray, zero_map: np.ndarray) -> np.ndarray:
+        """f(diff, x, y) - f(0, x, y): (..., H, W, 2) float32 for (..., H, W, 3) differences,
+        with zero_map = f(0, x, y); exactly 0 where the difference is exactly 0."""
+        g = self.predict(diff)
+        g -= zero_map
+        # Three elementwise compares: 3x faster than diff.any(axis=-1), a reduction over 3.
+        still = (diff[..., 0] == 0) & (diff[..., 1] == 0) & (diff[..., 2] == 0)
+        if still.any():
+            g[still] = 0.0
+        return g
+
 
 # -- lut --------------------------------------------------------------------------------------
 
@@ -105,6 +116,57 @@ class LutMapping(Mapping):
     def predict_flat(self, colour: np.ndarray, xy: np.ndarray) -> np.ndarray:
         idx = self._index(colour, xy, np).astype(np.int64)
         return self.table.reshape(-1, 2)[idx]
+
+    def relative(self, diff: np.ndarray, zero_map: np.ndarray) -> np.ndarray:
+        """f(diff) - f(0) by one lookup in a table from which each cell's f(0) is already taken
+        (the same float32 subtraction, so the same numbers as predict - zero_map): the colour
+        bins in int32, the cell as a cached per-pixel offset, one np.take of 8-byte entries."""
+        diff = np.asarray(diff, np.float32)
+        h, w = diff.shape[-3:-1]
+        rel = self._relative_table(zero_map)
+        if rel is None:  # a zero map that is not this table's own: the general path
+            return super().relative(diff, zero_map)
+        b = self.table.shape[2]
+        lo, hi = float(self.params["lo"]), float(self.params["hi"])
+        k = np.subtract(diff, np.float32(lo))
+        k *= np.float32(b / (hi - lo))
+        np.clip(k, 0, b - 1, out=k)
+        ki = k.astype(np.int32)  # floor: non-negative after the clip
+        idx = ki[..., 0] * np.int32(b * b)
+        idx += ki[..., 1] * np.int32(b)
+        idx += ki[..., 2]
+        idx += self._cell_offsets(h, w)
+        return np.take(rel, idx).view(np.float32).reshape(*diff.shape[:-1], 2)
+
+    def _cell_offsets(self, h: int, w: int) -> np.ndarray:
+        """(H, W) int32: the table offset of each pixel's spatial cell (cached per size)."""
+        cache = self.__dict__.setdefault("_offsets", {})
+        if (h, w) not in cache:
+            cy, cx, b = self.table.shape[0], self.table.shape[1], self.table.shape[2]
+            x, y = norm_xy(h, w)
+            jx = np.clip(np.floor((x + 1) * (cx / 2)), 0, cx - 1).astype(np.int64)
+            jy = np.clip(np.floor((y + 1) * (cy / 2)), 0, cy - 1).astype(np.int64)
+            cache[(h, w)] = ((jy[:, None] * cx + jx[None, :]) * b**3).astype(np.int32)
+        return cache[(h, w)]
+
+    def _relative_table(self, zero_map: np.ndarray) -> np.ndarray | None:
+        """The table minus each cell's f(0), as 8-byte entries (int64 view of the (p, q) float32
+        pairs), when zero_map is f(0) of this table; else None. Cached per zero map."""
+        cached = self.__dict__.get("_rel")
+        if cached is not None and cached[0] is zero_map:
+            return cached[1]
+        h, w = zero_map.shape[:2]
+        cy, cx, b = self.table.shape[0], self.table.shape[1], self.table.shape[2]
+        flat = self.table.reshape(cy * cx, b**3, 2)
+        k0 = int(self._index(np.zeros((1, 3), np.float32), np.zeros((1, 2), np.float32),
+                             np)[0]) % b**3  # the bin of a zero difference
+        own = flat[:, k0][self._cell_offsets(h, w) // b**3]
+        rel = None
+        if zero_map.shape == (h, w, 2) and np.array_equal(own, zero_map):
+            rel = np.ascontiguousarray(flat - flat[:, k0:k0 + 1]).reshape(-1, 2).view(np.int64)
+            rel = rel.reshape(-1)
+        self.__dict__["_rel"] = (zero_map, rel)
+        return rel
 
     def predict_torch(self, diff: Any) -> Any:
         import torch
@@ -210,6 +272,66 @@ class PolyMapping(Mapping):
     def _design(self, colour: Any, xy: Any, xp: Any) -> Any:
         return _poly_design(colour, xy, int(self.params["degree"]),
                             int(self.params["pos_degree"]), xp)
+
+    def predict(self, diff: np.ndarray) -> np.ndarray:
+        """(..., H, W, 2) float32 gradients of (..., H, W, 3) differences, frame by frame in
+        row layout: the colour monomials as rows (Tc, n) of a reused buffer, one (2 Tp, Tc)
+        @ (Tc, n) product, then the position monomials (cached per frame size, (Tp, H W))
+        weighted in place. Same sums as predict_flat in another float32 order (differences
+        of a few 1e-7 relative); about 3x faster at 480x640."""
+        diff = np.asarray(diff)
+        if diff.ndim < 3 or diff.shape[-1] != 3:
+            return super().predict(diff)
+        h, w = diff.shape[-3:-1]
+        hw = h * w
+        frames = diff.reshape(-1, hw, 3)
+        deg = int(self.params["degree"])
+        exps = exponents(deg, 3)
+        basis = self._basis_rows(h, w)  # (Tp, H W)
+        coef_t = self._coef_rows()  # (2 Tp, Tc), row 2 j + k
+        out = np.empty((frames.shape[0], hw, 2), np.float32)
+        step = CHUNK
+        rows = np.empty((exps.shape[0], min(step, hw)), np.float32)
+        pw = np.empty((3, deg + 1, min(step, hw)), np.float32)
+        scale = np.float32(1 / COLOUR_SCALE)
+        for f in range(frames.shape[0]):
+            for s in range(0, hw, step):
+                e = min(s + step, hw)
+                n = e - s
+                pw[:, 0, :n] = 1.0
+                np.multiply(frames[f, s:e].T, scale, out=pw[:, 1, :n])
+                for d in range(2, deg + 1):
+                    np.multiply(pw[:, d - 1, :n], pw[:, 1, :n], out=pw[:, d, :n])
+                for t, (e0, e1, e2) in enumerate(exps):
+                    np.multiply(pw[0, e0, :n], pw[1, e1, :n], out=rows[t, :n])
+                    if e2:
+                        rows[t, :n] *= pw[2, e2, :n]
+                m = coef_t @ rows[:, :n]  # (2 Tp, n)
+                b = basis[:, s:e]
+                acc = m[0:2] * b[0]
+                for j in range(1, b.shape[0]):
+                    m[2 * j:2 * j + 2] *= b[j]
+                    acc += m[2 * j:2 * j + 2]
+                out[f, s:e] = acc.T
+        return out.reshape(*diff.shape[:-1], 2)
+
+    def _basis_rows(self, h: int, w: int) -> np.ndarray:
+        """(Tp, H W) float32 position monomials of a frame's pixels (cached per size)."""
+        cache = self.__dict__.setdefault("_basis", {})
+        if (h, w) not in cache:
+            _, xy, _ = _flatten(np.zeros((h, w, 3), np.float32))
+            cache[(h, w)] = np.ascontiguousarray(
+                pos_basis(xy, int(self.params["pos_degree"]), np).T, np.float32)
+        return cache[(h, w)]
+
+    def _coef_rows(self) -> np.ndarray:
+        """(2 Tp, Tc) float32: the coefficients with row 2 j + k for position term j, output k."""
+        c = self.__dict__.get("_coef_t")
+        if c is None:
+            coef = self.arrays["poly.coef"]
+            tc = exponents(int(self.params["degree"]), 3).shape[0]
+            c = self.__dict__["_coef_t"] = np.ascontiguousarray(coef.reshape(tc, -1).T)
+        return c
 
     def predict_flat(self, colour: np.ndarray, xy: np.ndarray) -> np.ndarray:
         # sum_ij a_i b_j c_ij = sum_j b_j (A @ C_j): never forms the (N, Tc * Tp) design matrix.

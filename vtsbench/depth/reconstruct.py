@@ -88,9 +88,29 @@ def _numpy_depth(frames: np.ndarray, cal: Calibration, solver: str,
                  mask: np.ndarray | None) -> np.ndarray:
     from .poisson import integrate
 
+    if solver != "masked" and cal.markers is None and frames.dtype == np.uint8:
+        # a frame at a time through the build's preallocated path: the same float32 numbers
+        # (vtsbench.dataset.depthmaps; tests/test_build_depth.py), arrays that stay in cache
+        maker = _maker(cal)
+        return np.stack([maker.depth(f, solver) for f in frames])
     g = cal.gradients(frames)
     return integrate(g[..., 0], g[..., 1], method=solver, mask=mask, mm_per_px=cal.mm_per_px,
                      dtype=np.float32)
+
+
+def _maker(cal: Calibration) -> Any:
+    """The calibration's DepthMaker, made once (its lookup tables and buffers)."""
+    from ..dataset.depthmaps import DepthMaker
+
+    key = (cal.mapping, cal.zero_map, cal.background, cal.mm_per_px, cal.blur_px,
+           cal.colour_limit_dn)
+    held = cal.__dict__.get("_maker")
+    if held is None or len(held[0]) != len(key) or \
+            not all(a is b or a == b for a, b in zip(held[0], key, strict=True)
+                    if not isinstance(a, np.ndarray)) or \
+            not all(a is b for a, b in zip(held[0], key, strict=True) if isinstance(a, np.ndarray)):
+        held = cal.__dict__["_maker"] = (key, DepthMaker(cal))
+    return held[1]
 
 
 def _torch_depth(frames: np.ndarray, cal: Calibration, solver: str, mask: np.ndarray | None,

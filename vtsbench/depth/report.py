@@ -1,10 +1,15 @@
-"""The calibration report: a PNG of the held-out presses and a JSON of their errors.
+"""The calibration report: a PNG of the held-out presses, a contact sheet of every press's
+circle, and a JSON of their errors.
 
 For each shown press (the held-out ones; with `--holdout 0`, a few training presses, marked so)
 one row: the press frame around the contact, the reference depth (simulated truth, or the
 sphere model inside the circle), the reconstruction, the error after removing its best plane
 over the contact (what the plane-aligned RMSE measures), and the profiles along the row through
 the circle's centre (reference and plane-aligned reconstruction).
+
+circles.png (`contact_sheet`): every press, used or dropped, as a tile around its circle, the
+labelled circle and the detected one drawn in their own colours (the one used thicker), and under
+each tile its status and why: a bad circle shows in seconds.
 """
 
 from __future__ import annotations
@@ -121,4 +126,97 @@ def write_report(run: CalibrationRun, folder: str | Path) -> tuple[Path, Path]:
             axes[4].legend(fontsize=FONT)
     fig.tight_layout(rect=(0, 0, 1, 0.97))
     png = save_png(fig, folder / "report.png")
+    contact_sheet(run, folder / "circles.png")
     return png, js
+
+
+#: Contact sheet colours: the labelled circle, the detected one, and the status of a press.
+LABEL_COLOUR, DETECTED_COLOUR = "cyan", "magenta"
+STATUS_COLOUR = {"used": "black", "doubted": "darkorange", "dropped": "red"}
+SHEET_COLS = 8
+
+
+def _tile_box(rec: dict[str, Any], shape: tuple[int, int]) -> tuple[int, int, int, int]:
+    """(y0, y1, x0, x1) around the press's circles (1.8 radii), or the whole frame."""
+    cs = [c for c in (rec.get("circle"), rec.get("label"), rec.get("detected")) if c]
+    if not cs:
+        return 0, shape[0], 0, shape[1]
+    c = cs[0]
+    half = math.ceil(max(1.8 * max(k["r"] for k in cs), 10))
+    x, y = round(c["x"]), round(c["y"])
+    return (max(0, y - half), min(shape[0], y + half + 1), max(0, x - half),
+            min(shape[1], x + half + 1))
+
+
+def _tile_text(rec: dict[str, Any], held: set[str]) -> str:
+    """The status line and the reasons of a tile, wrapped to its width."""
+    import textwrap
+
+    lab, det = rec.get("label"), rec.get("detected")
+    status = rec["status"] + (", held out" if rec["id"] in held else "")
+    if rec["status"] != "dropped":
+        status += f" ({rec['source']})"
+    lines = [status]
+    if lab and det:
+        d = math.hypot(det["x"] - lab["x"], det["y"] - lab["y"])
+        lines.append(f"det-label {d:.1f} px, r {det['r'] / lab['r'] - 1:+.0%}")
+    elif det:
+        lines.append(f"r {det['r']:.1f} px")
+    for why in rec.get("reasons", []):
+        lines += textwrap.wrap(why, 30)
+    if rec.get("retried_after"):
+        lines.append("detected again")
+    return "\n".join(lines[:6])
+
+
+def contact_sheet(run: CalibrationRun, path: str | Path) -> Path:
+    """Every press of the run as a tile around its circle: the labelled circle (dashed) and the
+    detected one in their own colours, the circle used thicker, status and reasons beneath."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle
+
+    from ..figures import MIN_FONT_PT as FONT
+    from ..figures import save_png
+
+    recs = run.presses
+    held = {h.press.id for h in run.held_out}
+    cols = max(1, min(SHEET_COLS, len(recs)))
+    rows = max(1, math.ceil(len(recs) / cols))
+    fig = Figure(figsize=(1.9 * cols, 2.75 * rows + 0.7))
+    FigureCanvasAgg(fig)
+    n_drop = sum(r["status"] == "dropped" for r in recs)
+    fig.suptitle(f"{len(recs)} presses, {len(recs) - n_drop} used, {n_drop} dropped; circles: "
+                 f"{LABEL_COLOUR} dashed = labelled, {DETECTED_COLOUR} = detected, thick = used",
+                 fontsize=FONT + 1)
+    if not recs:
+        fig.text(0.5, 0.5, "no presses", ha="center")
+    for i, rec in enumerate(recs):
+        ax = fig.add_subplot(rows, cols, i + 1)
+        img = run.frames.get(rec["id"])
+        ax.set_xticks([])
+        ax.set_yticks([])
+        colour = STATUS_COLOUR.get(rec["status"], "black")
+        ax.set_title(rec["id"], fontsize=FONT, color=colour)
+        for side in ax.spines.values():
+            side.set_edgecolor(colour)
+            side.set_linewidth(2 if rec["status"] != "used" else 0.8)
+        if img is not None:
+            y0, y1, x0, x1 = _tile_box(rec, img.shape[:2])
+            ax.imshow(img[y0:y1, x0:x1], extent=(x0 - 0.5, x1 - 0.5, y1 - 0.5, y0 - 0.5))
+            used = rec.get("circle")
+            for key, col, style in (("label", LABEL_COLOUR, "--"), ("detected", DETECTED_COLOUR,
+                                                                    "-")):
+                c = rec.get(key)
+                if not c or c.get("x") is None:
+                    continue
+                thick = rec["status"] != "dropped" and used == c and rec["source"] == (
+                    "label" if key == "label" else "detected")
+                ax.add_patch(Circle((c["x"], c["y"]), c["r"], fill=False, color=col,
+                                    linestyle=style, linewidth=2.0 if thick else 1.0))
+                ax.plot([c["x"]], [c["y"]], "+", color=col, markersize=5)
+            ax.set_xlim(x0 - 0.5, x1 - 0.5)
+            ax.set_ylim(y1 - 0.5, y0 - 0.5)
+        ax.set_xlabel(_tile_text(rec, held), fontsize=FONT - 1, color=colour)
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    return save_png(fig, path)

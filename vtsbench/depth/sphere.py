@@ -19,11 +19,13 @@ down into a skirt whose shape the sphere does not describe. A circle radius of a
 `max_radius_frac` of the ball radius (hand-marked circles are often a little too large) is
 clamped to it before taking sqrt(R^2 - r^2), so every value is finite.
 
-`detect_circle` finds an unlabelled contact from the difference to the no-contact background: blur,
-threshold above the noise, the largest component and the lobes beside it for a first centre, then
-sub-pixel edge points along rays from it (the steepest fall of the change past its peak: the colour
-changes most where the cap is steepest, at its rim), a RANSAC circle with the ball's size as a
-prior, and a weighted geometric least-squares fit to its inliers.
+`detect_circle` finds an unlabelled contact from the difference to the no-contact background (the
+smooth light drift taken off, a marker grid divided out: `imprint.change_map`): two first centres,
+the largest strong-change component with the lobes beside it and the disc that best covers the
+whole change over the radii the ball can press (`radius_range`, `imprint.disc_search`), then
+sub-pixel edge points along rays from each (the steepest fall of the change past its peak: the
+colour changes most where the cap is steepest, at its rim), a RANSAC circle within that radius
+range, and a weighted geometric least-squares fit to its inliers.
 """
 
 from __future__ import annotations
@@ -134,12 +136,14 @@ def sphere_fields(shape: tuple[int, int], x: float, y: float, r_px: float,
 # -- contact detection -----------------------------------------------------------------------
 
 
-def change_map(image: np.ndarray, background: np.ndarray, sigma: float) -> np.ndarray:
-    """Blurred sum over channels of |image - background| (float32, H x W)."""
-    import cv2
+def change_map(image: np.ndarray, background: np.ndarray, sigma: float,
+               markers: bool = False) -> np.ndarray:
+    """Blurred sum over channels of |image - background| (float32, H x W); markers: fill the
+    background's marker dots first (`imprint.change_map`)."""
+    from .imprint import change_map as imprint_change
+    from .imprint import marker_dots
 
-    d = np.abs(image.astype(np.float32) - background.astype(np.float32)).sum(axis=-1)
-    return cv2.GaussianBlur(d, (0, 0), sigma) if sigma > 0 else d
+    return imprint_change(image, background, sigma, marker_dots(background) if markers else None)
 
 
 def fit_circle(xs: np.ndarray, ys: np.ndarray, weights: np.ndarray | None = None
@@ -264,6 +268,23 @@ def _ray_edges(m: np.ndarray, cx: float, cy: float, r_max: float, sigma: float,
     return ex[ok].astype(np.float64), ey[ok].astype(np.float64), w[ok].astype(np.float64)
 
 
+#: The plausible contact radius, as fractions of the ball radius in pixels: from a press about
+#: a fiftieth of the ball radius deep (0.2 R: 0.04 mm for a 2 mm ball) to a little beyond the
+#: equator (an imprint's edge can lie beyond it: Taxim's at 1.03-1.07 R; a circle above 1.3 R
+#: fails its check anyway).
+MIN_CONTACT_FRAC, MAX_CONTACT_FRAC = 0.2, 1.3
+
+
+def radius_range(ball_px: float | None, min_radius_px: float, shape: tuple[int, int]
+                 ) -> tuple[float, float]:
+    """The contact radii (px) a ball of ball_px pixels can press: MIN_CONTACT_FRAC to
+    MAX_CONTACT_FRAC of it (never below min_radius_px); without the ball, min_radius_px to the
+    image's longer side."""
+    if not ball_px:
+        return float(min_radius_px), float(max(shape))
+    return max(float(min_radius_px), MIN_CONTACT_FRAC * ball_px), MAX_CONTACT_FRAC * ball_px
+
+
 def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | None = None,
                   min_radius_px: float = 3.0,
                   start: tuple[float, float, float] | None = None,
@@ -271,28 +292,76 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
                   ) -> tuple[float, float, float] | None:
     """The contact circle (x, y, r) px of a ball press, or None when no contact is visible.
 
-    Blur the change to the background, keep what stands clearly above the noise (6 robust standard
-    deviations and a fifth of the strongest change), take the convex hull of the largest connected
-    component and the lobes beside it (`imprint_lobes`; the flat top of the cap barely changes
-    colour) for a first centre and size, then find sub-pixel edge points along rays from the centre
-    (`_ray_edges`) and fit a circle to them: RANSAC against rays that cross a shadow or a
-    neighbouring change, then a weighted geometric least-squares fit to the inliers, three times
-    from the new centre. ball_px (the ball radius in pixels, from the scale) bounds the radius at
-    two ball radii (loose: a wrong scale is then reported by the circle's check, not as a missing
-    contact). start: a first guess (x, y, r) instead of the component (what calibration retries with
-    when the first circle fails its check). restarts: fit again from 8 starts around the circle and
-    keep one that clearly more of the edge lies on (`_best_of_starts`; False: the single fit, about
-    9 times faster).
+    The change map (`imprint.change_map`: blurred |image - background|, marker dots of the
+    background filled) gives two starts: the disc over the plausible radii (`radius_range`, from
+    the ball and the scale) that best covers the changed pixels (`imprint.disc_search`: the
+    whole change, not its strongest part), and the convex hull of the strong-change component
+    and the lobes beside it (`imprint_lobes`). From each, sub-pixel edge points along rays
+    (`_ray_edges`) are fitted with a circle: RANSAC against rays that cross a shadow or a
+    neighbouring change, radius within the plausible range, then a weighted geometric
+    least-squares fit to the inliers, three times from the new centre. Of the two circles, the
+    one with the most edge weight on it (`edge_support`) among those whose disc mostly shows a
+    change is kept (the component's unless the other has RESTART_GAIN times its edge weight).
+    ball_px: the ball radius in pixels (without it, any radius from
+    min_radius_px). start: a first guess (x, y, r) instead of the two starts (what calibration
+    retries with when the first circle fails its check). restarts: fit again from 8 starts
+    around the circle and keep one that clearly more of the edge lies on (`_best_of_starts`;
+    False: about 9 times faster).
     """
     if sigma is None:
         sigma = default_sigma(image.shape[:2])
-    m = change_map(image, background, sigma)
-    found = (_fit_rays(m, *start, sigma, min_radius_px, ball_px) if start is not None else
-             _component_fit(m, sigma, min_radius_px, ball_px))
+    m = change_map(image, background, sigma, markers=True)
+    rr = radius_range(ball_px, min_radius_px, m.shape)
+    if start is not None:
+        found = _fit_rays(m, *start, sigma, rr)
+    else:
+        found = _pick(m, [_component_fit(m, sigma, min_radius_px, rr), _search_fit(m, sigma, rr)],
+                      sigma)
     return _best_of_starts(m, found, sigma, min_radius_px, ball_px) if restarts else found
 
 
-def _component_fit(m: np.ndarray, sigma: float, min_radius_px: float, ball_px: float | None
+def _search_fit(m: np.ndarray, sigma: float, rr: tuple[float, float]
+                ) -> tuple[float, float, float] | None:
+    """The circle fitted from the disc that best covers the change (`imprint.disc_search`,
+    radii up to 1.6 times the plausible range: the change's support takes in the skirt)."""
+    from .imprint import disc_search
+
+    found = disc_search(m, (rr[0], 1.6 * rr[1]))
+    if found is None or found[3] < 0.25 * math.pi * rr[0] ** 2:
+        return None
+    x, y, r, _ = found
+    return _fit_rays(m, x, y, min(max(r, rr[0]), rr[1]), sigma, rr)
+
+
+def _cover(m: np.ndarray, circle: tuple[float, float, float]) -> float:
+    """The share of the circle's disc (inside the image) whose change stands above the noise."""
+    from .imprint import changed
+
+    x, y, r = circle
+    h, w = m.shape
+    yy, xx = np.ogrid[:h, :w]
+    disc = (xx - x) ** 2 + (yy - y) ** 2 <= r * r
+    return float(changed(m)[disc].mean()) if disc.any() else 0.0
+
+
+def _pick(m: np.ndarray, found: list[tuple[float, float, float] | None], sigma: float
+          ) -> tuple[float, float, float] | None:
+    """Of the circles found from several starts, the first unless another has RESTART_GAIN
+    times its edge weight (`edge_support`), among those whose disc mostly shows a change
+    (COVER_MIN; all of them when none does)."""
+    cands = [c for c in found if c is not None]
+    if not cands:
+        return None
+    covered = [c for c in cands if _cover(m, c) >= COVER_MIN] or cands
+    best, score = covered[0], RESTART_GAIN * edge_support(m, covered[0], sigma)
+    for c in covered[1:]:
+        sc = edge_support(m, c, sigma)
+        if sc > score:
+            best, score = c, sc
+    return best
+
+
+def _component_fit(m: np.ndarray, sigma: float, min_radius_px: float, rr: tuple[float, float]
                    ) -> tuple[float, float, float] | None:
     """The circle fitted from the strong-change components of the change map `m` (the convex
     hull of the imprint's lobes, `imprint_lobes`: its centroid and equal-area radius as the
@@ -309,8 +378,8 @@ def _component_fit(m: np.ndarray, sigma: float, min_radius_px: float, ball_px: f
     cv2.fillConvexPoly(hull, cv2.convexHull(pts), 1)
     area = int(hull.sum())
     ys, xs = np.nonzero(hull)
-    return _fit_rays(m, float(xs.mean()), float(ys.mean()), math.sqrt(area / math.pi), sigma,
-                     min_radius_px, ball_px)
+    r0 = min(max(math.sqrt(area / math.pi), rr[0]), rr[1])
+    return _fit_rays(m, float(xs.mean()), float(ys.mean()), r0, sigma, rr)
 
 
 #: A strong-change component joins the largest one as a lobe of the same imprint when it has at
@@ -382,9 +451,10 @@ def _best_of_starts(m: np.ndarray, found: tuple[float, float, float] | None, sig
         return None
     best, score = found, RESTART_GAIN * edge_support(m, found, sigma)
     d = RESTART_FRAC * found[2]
+    rr = radius_range(ball_px, min_radius_px, m.shape)
     for ang in np.arange(8) * (np.pi / 4):
         c = _fit_rays(m, found[0] + d * math.cos(ang), found[1] + d * math.sin(ang), found[2],
-                      sigma, min_radius_px, ball_px)
+                      sigma, rr)
         if c is not None:
             sc = edge_support(m, c, sigma)
             if sc > score:
@@ -393,13 +463,12 @@ def _best_of_starts(m: np.ndarray, found: tuple[float, float, float] | None, sig
 
 
 def _fit_rays(m: np.ndarray, cx: float, cy: float, r0: float, sigma: float,
-              min_radius_px: float, ball_px: float | None = None
-              ) -> tuple[float, float, float] | None:
-    """Fit the circle to the edges found along rays from (cx, cy), three times (see
-    detect_circle)."""
+              rr: tuple[float, float]) -> tuple[float, float, float] | None:
+    """Fit the circle, radius within rr, to the edges found along rays from (cx, cy), three
+    times (see detect_circle)."""
     h, w = m.shape
     r = r0
-    r_hi = 2.0 * ball_px if ball_px else float(max(h, w))
+    min_radius_px, r_hi = rr
     for _ in range(3):
         px, py, wt = _ray_edges(m, cx, cy, 1.5 * max(r0, r), sigma)
         if px.size < 12:
@@ -458,7 +527,7 @@ def change_support(image: np.ndarray, background: np.ndarray, sigma: float | Non
     """The imprint as the colour change shows it: (x, y, r) of the largest region whose change
     stands above the noise (r: the radius of a disc of its area), or None if there is none."""
     sigma = default_sigma(image.shape[:2]) if sigma is None else sigma
-    m = change_map(image, background, sigma)
+    m = change_map(image, background, sigma, markers=True)
     return _largest_change(m, _change_threshold(m)[1])
 
 
@@ -476,7 +545,7 @@ def circle_doubts(circle: tuple[float, float, float], image: np.ndarray, backgro
         out.append(f"centre ({x:.1f}, {y:.1f}) lies outside the {h}x{w} image")
     if r > 1.3 * ball_px:
         out.append(f"radius {r:.1f} px is larger than the ball ({ball_px:.1f} px)")
-    m = change_map(image, background, default_sigma((h, w)))
+    m = change_map(image, background, default_sigma((h, w)), markers=True)
     _, loose = _change_threshold(m)
     sup = _largest_change(m, loose)  # what change_support gives, from the same map
     if sup is None:

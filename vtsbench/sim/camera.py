@@ -36,6 +36,7 @@ class Take:
     imprint_gain: float
     quality: int | None  # None: no compression
     gains: np.ndarray  # (T, 3) float32 per-channel gain of each frame
+    keyframes: tuple[int, ...] = ()  # frames sent whole (the stream's key frames)
 
 
 def gel_gain(app: Appearance, gel: int) -> float:
@@ -58,6 +59,10 @@ def draw_take(app: Appearance, rng: np.random.Generator | None, n_frames: int,
         return Take(gain, q, gains.astype(np.float32))
     q = None if app.jpeg_quality is None else int(rng.integers(app.jpeg_quality[0],
                                                                app.jpeg_quality[1] + 1))
+    keys: tuple[int, ...] = ()
+    if app.keyframe_interval:  # the window starts anywhere in the stream's group of pictures
+        phase = int(rng.integers(app.keyframe_interval))
+        keys = tuple(t for t in range(1, n_frames) if (phase + t) % app.keyframe_interval == 0)
     jump = rng.random() < app.wb_jump_share
     first = np.array([rng.uniform(*r) for r in app.wb_jump_gain])
     second = rng.uniform(*app.wb_settle_gain, 3)
@@ -68,7 +73,7 @@ def draw_take(app: Appearance, rng: np.random.Generator | None, n_frames: int,
             gains[0] *= first
             if n_frames > 2:
                 gains[1] *= second
-    return Take(gain, q, gains.astype(np.float32))
+    return Take(gain, q, gains.astype(np.float32), keys)
 
 
 @lru_cache(maxsize=8)
@@ -83,17 +88,6 @@ def _still(s: Sensor, capture: Capture, scale: float,
     return flat, sigma, flat * still, sigma * still
 
 
-def _union(a: tuple[slice, slice] | None,
-           b: tuple[slice, slice] | None) -> tuple[slice, slice] | None:
-    """The bounding box of two boxes (None = empty)."""
-    if a is None or a[0].stop <= a[0].start or a[1].stop <= a[1].start:
-        return b
-    if b is None:
-        return a
-    return (slice(min(a[0].start, b[0].start), max(a[0].stop, b[0].stop)),
-            slice(min(a[1].start, b[1].start), max(a[1].stop, b[1].stop)))
-
-
 def expose(s: Sensor, capture: Capture, app: Appearance, take: Take, t: int,
            rng: np.random.Generator | None, patch: np.ndarray | None, rows: slice,
            cols: slice, pattern: GelPattern, layer: np.ndarray,
@@ -104,32 +98,34 @@ def expose(s: Sensor, capture: Capture, app: Appearance, take: Take, t: int,
     cached flat and noise images with the still pattern are used."""
     import cv2
 
-    flat, _, flat_l, sigma_l = _still(s, capture, app.noise_scale, pattern)
+    flat, sigma, flat_l, sigma_l = _still(s, capture, app.noise_scale, pattern)
     n = None if rng is None else normal_field(rng, s.height, s.width)
     if n is None:
         out = flat_l.copy()
     else:
         out = sigma_l * n
         out += flat_l
-    box = _union(None if patch is None else (rows, cols), moved)
-    if box is not None:
-        rr, cc = box
-        sig = flat[rr, cc].copy()
-        if patch is not None:
-            pr = slice(rows.start - rr.start, rows.stop - rr.start)
-            pc = slice(cols.start - cc.start, cols.stop - cc.start)
-            base = flat[rows, cols]
-            dev = patch * np.float32(capture.exposure)
-            dev -= base
-            dev *= np.float32(take.imprint_gain)
-            sig[pr, pc] += dev
+    if moved is not None:  # the flat image's cached noise, under the moved pattern
+        mr, mc = moved
+        if n is None:
+            sig = flat[mr, mc].copy()
+        else:
+            sig = sigma[mr, mc] * n[mr, mc]
+            sig += flat[mr, mc]
+        sig *= layer[mr, mc][..., None]
+        out[mr, mc] = sig
+    if patch is not None:  # the imprint: its own signal, so its own noise
+        sig = patch * np.float32(capture.exposure)
+        sig -= flat[rows, cols]
+        sig *= np.float32(take.imprint_gain)
+        sig += flat[rows, cols]
         if n is not None:
             noisy = noise_sigma(sig, capture)
             noisy *= np.float32(app.noise_scale)
-            noisy *= n[rr, cc]
+            noisy *= n[rows, cols]
             sig += noisy
-        sig *= layer[rr, cc][..., None]
-        out[rr, cc] = sig
+        sig *= layer[rows, cols][..., None]
+        out[rows, cols] = sig
     g = take.gains[t]
     return cv2.multiply(out, (float(g[0]), float(g[1]), float(g[2]), 0.0), dtype=cv2.CV_8U)
 
@@ -164,11 +160,12 @@ def changed_blocks(frame: np.ndarray, sent: np.ndarray, skip_dn: float) -> np.nd
 
 
 def compress(frames: np.ndarray, quality: int | None, skip_dn: float,
-             refresh: float = 0.0, rng: np.random.Generator | None = None) -> np.ndarray:
+             refresh: float = 0.0, rng: np.random.Generator | None = None,
+             keyframes: tuple[int, ...] = ()) -> np.ndarray:
     """Frames (T, H, W, 3) uint8 as a video codec returns them: JPEG at `quality`; a block is
     sent again when its content changed by more than skip_dn since it was last sent, or (with
     probability `refresh` per frame, drawn from rng) anyway; other blocks are kept from the
-    previous decoded frame."""
+    previous decoded frame. The frames in `keyframes` (and the first) are sent whole."""
     if quality is None:
         return frames
     import cv2
@@ -178,8 +175,9 @@ def compress(frames: np.ndarray, quality: int | None, skip_dn: float,
     out = np.empty_like(frames)
     sent = frames[0].copy()
     for t, frame in enumerate(frames):
-        if t == 0:
-            out[0] = jpeg(frame, quality)
+        if t == 0 or t in keyframes:
+            out[t] = jpeg(frame, quality)
+            sent = frame.copy()
             continue
         mask = changed_blocks(frame, sent, skip_dn)
         if refresh > 0.0 and rng is not None:

@@ -34,9 +34,9 @@ class Mechanics:
     """Options of the contact mechanics and speed profiles of generator 2 (defaults: real)."""
 
     #: Shares of the speed profiles steady, varying, stick_slip, jerk.
-    profile_mix: tuple[float, float, float, float] = (0.1, 0.45, 0.2, 0.25)
+    profile_mix: tuple[float, float, float, float] = (0.35, 0.55, 0.05, 0.05)
     #: Gamma shape of the frame steps of a varying profile: speed CV = 1 / sqrt(shape).
-    speed_shape: float = 2.4
+    speed_shape: float = 6.0
     #: Share of the steps of a stick-slip profile in which the object sticks (does not move).
     stick_step_share: float = 0.5
     #: Share of the window's motion that the jerk step (or the two jerk steps) carries.
@@ -48,13 +48,16 @@ class Mechanics:
     #: Tangential load already on the contact at the window's first frame, share of capacity.
     preload: tuple[float, float] = (0.0, 0.9)
     #: Decay length (mm) of the gel shear outside the contact.
-    shear_decay_mm: float = 0.8
+    shear_decay_mm: float = 5.0
     #: Lag of the surface at the contact rim under full sliding, share of the stick motion.
     rim_lag: float = 0.5
     #: Share of the press and slip windows in which contact is made or lost.
-    contact_change_share: float = 0.45
+    contact_change_share: float = 0.15
     #: Height (mm) of the object's nominal top above the gel in frames without contact.
     lift_mm: tuple[float, float] = (0.08, 0.3)
+    #: A held object loads the gel tangentially too (a grasp carries its weight): the gel of a
+    #: held sequence is sheared by a preload share of its capacity, the same in every frame.
+    held_shear: bool = True
 
     def __post_init__(self) -> None:
         """Refuse options outside their meaning (shares in [0, 1], positive lengths)."""
@@ -82,7 +85,7 @@ class ContactPath:
     shear_px: tuple[tuple[float, float], ...]
     twist_deg: tuple[float, ...]
     stick: tuple[float, ...]
-    profile: str = "steady"  # the speed profile (one of PROFILES)
+    profile: str = "steady"  # the speed profile (one of PROFILES), "held" for a held object
     contact_change: str | None = None  # 'made' or 'lost' inside the window, or None
 
 
@@ -126,8 +129,12 @@ def progress(weights: np.ndarray) -> tuple[float, ...]:
 
 
 def _log_uniform(rng: np.random.Generator, lo: float, hi: float) -> float:
-    """A log-uniform draw in [lo, hi]."""
-    return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
+    """A log-uniform draw in [lo, hi]; 0 when hi is 0 (the effect off; the draw is still
+    taken, so that the other draws of the sequence stay the same)."""
+    u = float(rng.random())
+    if hi <= 0.0:
+        return 0.0
+    return float(math.exp(math.log(lo) + u * (math.log(hi) - math.log(lo))))
 
 
 def contact_path(mech: Mechanics, rng: np.random.Generator, prog: tuple[float, ...],
@@ -162,6 +169,19 @@ def contact_path(mech: Mechanics, rng: np.random.Generator, prog: tuple[float, .
         stick.append(math.sqrt(max(0.0, 1.0 - delta / cap)))
     return ContactPath(tuple(rotations), tuple(shear), tuple(twist), tuple(stick), profile,
                        contact_change)
+
+
+def held_path(mech: Mechanics, rng: np.random.Generator, n: int,
+              mm_per_px: float) -> ContactPath:
+    """The path of a held object: no motion, the gel sheared by a preload share of its
+    capacity in a random direction in every frame (none with `held_shear` off)."""
+    cap = _log_uniform(rng, *mech.shear_capacity_mm) / mm_per_px
+    pre = float(rng.uniform(*mech.preload))
+    angle = float(rng.uniform(0.0, 2.0 * math.pi))
+    delta = pre * cap if mech.held_shear else 0.0
+    shear = (delta * math.cos(angle), delta * math.sin(angle))
+    stick = math.sqrt(max(0.0, 1.0 - delta / cap))
+    return ContactPath((0.0,) * n, (shear,) * n, (0.0,) * n, (stick,) * n, "held")
 
 
 def _region(contact: np.ndarray, f: int, close_px: int) -> np.ndarray:
@@ -230,9 +250,20 @@ def cell_factor(mm_per_px: float) -> int:
     return max(1, round(0.1 / mm_per_px))
 
 
+def _same_frame(contact: np.ndarray, motion_px: np.ndarray, path: ContactPath, t: int) -> bool:
+    """Whether frame t's surface field is frame t-1's (same load, pose and contact)."""
+    return (path.shear_px[t] == path.shear_px[t - 1] and path.twist_deg[t] == path.twist_deg[t - 1]
+            and path.stick[t] == path.stick[t - 1]
+            and bool((motion_px[t] == motion_px[t - 1]).all())
+            and np.array_equal(contact[t], contact[t - 1]))
+
+
 def surface_displacement(contact: np.ndarray, motion_px: np.ndarray, pivot: tuple[float, float],
-                         path: ContactPath, mech: Mechanics, mm_per_px: float) -> np.ndarray:
-    """Gel surface displacement (T, H, W, 2) float32 px from frame 0, from each frame's contact.
+                         path: ContactPath, mech: Mechanics, mm_per_px: float,
+                         from_rest: bool = False) -> np.ndarray:
+    """Gel surface displacement (T, H, W, 2) float32 px from frame 0 (from_rest: from the
+    unloaded gel, so that a preloaded first frame is already displaced), from each frame's
+    contact.
 
     Solved on a grid of about 0.1 mm cells over the frame and interpolated bilinearly; the
     contact centre of frame t is the pivot moved by the object's displacement motion_px[t].
@@ -242,15 +273,21 @@ def surface_displacement(contact: np.ndarray, motion_px: np.ndarray, pivot: tupl
     t_n, h, w = contact.shape
     f = cell_factor(mm_per_px)
     close = max(1, round(CLOSE_MM / (2.0 * f * mm_per_px)))
-    fields = []
+    fields: list[np.ndarray] = []
     for t in range(t_n):
+        if t and _same_frame(contact, motion_px, path, t):  # nothing changed: same field
+            fields.append(fields[-1])
+            continue
         cells = _region(contact[t], f, close)
         centre = (pivot[0] + float(motion_px[t, 0]), pivot[1] + float(motion_px[t, 1]))
         fields.append(surface_field(cells, f * mm_per_px, centre, path.shear_px[t],
                                     path.twist_deg[t], path.stick[t], mech, float(f)))
     out = np.zeros((t_n, h, w, 2), np.float32)
-    for t in range(1, t_n):
-        d = fields[t] - fields[0]
+    for t in range(0 if from_rest else 1, t_n):
+        if t and fields[t] is fields[t - 1]:
+            out[t] = out[t - 1]
+            continue
+        d = fields[t] if from_rest else fields[t] - fields[0]
         if not d.any():
             continue
         if f > 1:

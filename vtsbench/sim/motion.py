@@ -20,6 +20,10 @@ from .scene import Effects, Scene
 SLIP_RANGE_MM = (0.08, 1.5)
 #: Total indentation increase of a press sequence (mm), drawn log-uniform.
 PRESS_RANGE_MM = (0.08, 0.8)
+#: Generator 2's slip and press ranges (mm, log-uniform), from the motion of real GelSight
+#: Mini windows (docs/simulator.md, "Generator 2: realistic slip").
+SLIP_RANGE_V2_MM = (0.06, 0.4)
+PRESS_RANGE_V2_MM = (0.08, 0.8)
 #: Shallowest depth (mm) a press sequence starts from.
 PRESS_START_MM = 0.02
 #: Object centres stay in the central part of the frame: this share of it is kept clear.
@@ -95,19 +99,27 @@ def _log_uniform(rng: np.random.Generator, lo: float, hi: float) -> float:
     return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
 
 
-def sample_motion(state: str, rng: np.random.Generator,
-                  depth_range: tuple[float, float]) -> Motion:
-    """A random motion of an intended state ('static', 'press' or 'slip')."""
+def slip_range(generator: int = 1) -> tuple[float, float]:
+    """The slip distance range (mm) of a generator."""
+    return SLIP_RANGE_V2_MM if generator >= 2 else SLIP_RANGE_MM
+
+
+def sample_motion(state: str, rng: np.random.Generator, depth_range: tuple[float, float],
+                  generator: int = 1) -> Motion:
+    """A random motion of an intended state ('static', 'press' or 'slip'), in the ranges of
+    its generator."""
     lo, hi = depth_range
+    press_range = PRESS_RANGE_V2_MM if generator >= 2 else PRESS_RANGE_MM
     if state == "static":
         return hold(float(rng.uniform(lo, hi)))
     if state == "press":
-        dz = min(_log_uniform(rng, *PRESS_RANGE_MM), hi - PRESS_START_MM)
+        dz = min(_log_uniform(rng, *press_range), hi - PRESS_START_MM)
         d1 = float(rng.uniform(max(lo, dz + PRESS_START_MM), hi))
         return press(d1 - dz, d1)
     if state == "slip":
         angle = float(rng.uniform(0.0, 360.0))
-        return slip(angle, _log_uniform(rng, *SLIP_RANGE_MM), float(rng.uniform(lo, hi)))
+        return slip(angle, _log_uniform(rng, *slip_range(generator)),
+                    float(rng.uniform(lo, hi)))
     raise ValueError(f"unknown state {state!r}")
 
 

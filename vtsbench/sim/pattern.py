@@ -151,6 +151,9 @@ def gel_pattern(app: Appearance, gel: int, height: int, width: int,
     if markers:
         _markers(surface, app, rng, mm_per_px)
     _dust(surface, app, rng, mm_per_px)
+    if app.grain > 0.0:  # the coating's fine grain: a fixed texture of every spatial frequency
+        surface *= 1.0 + np.float32(app.grain) * rng.standard_normal((height, width),
+                                                                      np.float32)
     return GelPattern(surface, border, surface * border, markers)
 
 

@@ -9,13 +9,18 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..labels import STATES
-from .motion import SLIP_RANGE_MM, Motion, place_path, sample_motion, sequence_scene
+from .motion import Motion, place_path, sample_motion, sequence_scene, slip_range
 from .objects import BALL, BALL_RADIUS_MM, OBJECTS, ObjectInstance, random_instance
 from .scene import Effects, Scene
+
+if TYPE_CHECKING:
+    from .appearance import Appearance
+    from .mechanics import Mechanics
 
 KIND_CODES = {"static": 0, "sequence": 1, "press": 2}
 _SESSION_CODE = 3
@@ -32,9 +37,9 @@ MIN_SIZE_PX = 32
 #: uneven speed, contact made or lost, the gel's fixed pattern and a real camera.
 GENERATORS = (1, 2)
 LATEST_GENERATOR = 2
-#: What `vtsbench simulate` writes unless told: 1 until generator 2's defaults sit inside the real
-#: clips' ranges (`vtsbench stats`) and the benchmark and its published results are rebuilt on it,
-#: so that the demo's dataset, docs/results.md and the leaderboards keep describing one simulator.
+#: What `vtsbench simulate` writes unless told: 1 until the benchmark and its published results
+#: are rebuilt on generator 2, so that the demo's dataset, docs/results.md and the leaderboards keep
+#: describing one simulator.
 DEFAULT_GENERATOR = 1
 
 
@@ -131,20 +136,22 @@ def size_problem(size: tuple[int, int], mm_per_px: float, presses: bool) -> str 
     return None
 
 
-def _generation(scene: Scene, generator: int) -> Scene:
+def _generation(scene: Scene, generator: int, appearance: Appearance | None = None) -> Scene:
     """The scene with the sensor of its generator: version 2 adds the gel mechanics and the
-    sensor's appearance (fixed pattern, camera); version 1 leaves it as it is."""
+    sensor's appearance (fixed pattern, camera; the default gel's unless given); version 1
+    leaves it as it is."""
     if generator < 2:
         return scene
-    from .appearance import Appearance
+    from .appearance import sensor_appearance
     from .mechanics import Mechanics
 
     return dataclasses.replace(scene, mechanics=scene.mechanics or Mechanics(),
-                               appearance=Appearance())
+                               appearance=appearance or sensor_appearance())
 
 
 def static_scene(plan: EntryPlan, rng: np.random.Generator, size: tuple[int, int],
-                 mm_per_px: float, generator: int = 1) -> Scene:
+                 mm_per_px: float, generator: int = 1,
+                 appearance: Appearance | None = None) -> Scene:
     """A single frame of a held object at a random pose, place and depth."""
     from .objects import by_name
 
@@ -153,23 +160,32 @@ def static_scene(plan: EntryPlan, rng: np.random.Generator, size: tuple[int, int
     depth = float(rng.uniform(*cls.depth_mm))
     center = place_path(Motion(0.0, 0.0, depth, depth), rng, size, mm_per_px)
     return _generation(Scene(obj, (center,), (depth,), size, mm_per_px,
-                             Effects(texture=cls.texture is not None)), generator)
+                             Effects(texture=cls.texture is not None)), generator, appearance)
 
 
 def sequence_plan_scene(plan: EntryPlan, rng: np.random.Generator, size: tuple[int, int],
-                        mm_per_px: float, n_frames: int,
-                        generator: int = 1) -> tuple[Scene, Motion]:
-    """A sequence of the plan's intended state, and the motion that made it."""
+                        mm_per_px: float, n_frames: int, generator: int = 1,
+                        appearance: Appearance | None = None,
+                        mechanics: Mechanics | None = None) -> tuple[Scene, Motion]:
+    """A sequence of the plan's intended state, and the motion that made it (generator 2:
+    with the given sensor appearance and gel mechanics, the defaults unless given)."""
     from .objects import by_name
 
     cls = by_name(plan.object)
     obj = random_instance(cls, rng)
-    motion = sample_motion(plan.state or "static", rng, cls.depth_mm)
+    motion = sample_motion(plan.state or "static", rng, cls.depth_mm, generator)
     if generator >= 2 and plan.state in ("press", "slip"):
-        return _moving_scene_v2(obj, motion, plan.state, rng, size, mm_per_px, n_frames)
+        return _moving_scene_v2(obj, motion, plan.state, rng, size, mm_per_px, n_frames,
+                                appearance, mechanics)
     start = place_path(motion, rng, size, mm_per_px)
     scene = sequence_scene(obj, motion, start, n_frames, size, mm_per_px)
-    return _generation(scene, generator), motion
+    if generator >= 2:  # a held object's tangential load shears the gel
+        from .mechanics import Mechanics, held_path
+
+        mech = mechanics or Mechanics()
+        scene = dataclasses.replace(scene, mechanics=mech,
+                                    path=held_path(mech, rng, n_frames, mm_per_px))
+    return _generation(scene, generator, appearance), motion
 
 
 def _contact_change(state: str, motion: Motion, prog: tuple[float, ...],
@@ -177,8 +193,8 @@ def _contact_change(state: str, motion: Motion, prog: tuple[float, ...],
     """Whether contact is made or lost inside the window, and the frame it changes at.
 
     'made' at k: no contact before frame k; 'lost' at k: no contact from frame k. A slip's
-    change frame leaves at least the smallest slip (SLIP_RANGE_MM[0]) in contact, so that the
-    window stays a slip under the labelling rule.
+    change frame leaves at least generator 2's smallest slip (slip_range(2)[0]) in contact, so
+    that the window stays a slip under the labelling rule.
     """
     n = len(prog)
     if n < 3 or rng.random() >= share:
@@ -187,10 +203,11 @@ def _contact_change(state: str, motion: Motion, prog: tuple[float, ...],
         return "made", int(rng.integers(1, n - 1))
     dist = math.hypot(motion.dx_mm, motion.dy_mm)
     made = rng.random() < 0.5
+    least = slip_range(2)[0]
     if made:
-        ks = [k for k in range(1, n - 1) if (1.0 - prog[k]) * dist >= SLIP_RANGE_MM[0]]
+        ks = [k for k in range(1, n - 1) if (1.0 - prog[k]) * dist >= least]
     else:
-        ks = [k for k in range(2, n) if prog[k - 1] * dist >= SLIP_RANGE_MM[0]]
+        ks = [k for k in range(2, n) if prog[k - 1] * dist >= least]
     if not ks:
         return None, 0
     return ("made" if made else "lost"), int(ks[int(rng.integers(len(ks)))])
@@ -198,12 +215,13 @@ def _contact_change(state: str, motion: Motion, prog: tuple[float, ...],
 
 def _moving_scene_v2(obj: ObjectInstance, motion: Motion, state: str,
                      rng: np.random.Generator, size: tuple[int, int], mm_per_px: float,
-                     n_frames: int) -> tuple[Scene, Motion]:
+                     n_frames: int, appearance: Appearance | None = None,
+                     mechanics: Mechanics | None = None) -> tuple[Scene, Motion]:
     """A generator-2 press or slip: uneven speed, rotation, partial slip of the gel, and
     contact made or lost inside the window (docs/simulator.md, "Generator 2")."""
     from .mechanics import Mechanics, contact_path, progress, step_weights
 
-    mech = Mechanics()
+    mech = mechanics or Mechanics()
     kind, weights = step_weights(mech, rng, n_frames - 1)
     prog = progress(weights)
     d0, d1 = motion.depth0_mm, motion.depth1_mm
@@ -223,11 +241,11 @@ def _moving_scene_v2(obj: ObjectInstance, motion: Motion, state: str,
     effects = Effects(texture=obj.cls.texture is not None, motion=True)
     scene = Scene(obj, motion.centers(start, n_frames, mm_per_px), motion.depths(n_frames), size,
                   mm_per_px, effects, mechanics=mech, path=path)
-    return _generation(scene, 2), motion
+    return _generation(scene, 2, appearance), motion
 
 
 def press_scene(rng: np.random.Generator, size: tuple[int, int], mm_per_px: float,
-                generator: int = 1) -> Scene:
+                generator: int = 1, appearance: Appearance | None = None) -> Scene:
     """A calibration press: the smooth ball at a random depth, its contact inside the frame."""
     height, width = size
     depth = float(rng.uniform(PRESS_DEPTH_MM[0], max_press_depth_mm(size, mm_per_px)))
@@ -236,4 +254,4 @@ def press_scene(rng: np.random.Generator, size: tuple[int, int], mm_per_px: floa
     cy = float(rng.uniform(min(reach, (height - 1) / 2), max(reach, height - 1 - reach)))
     obj = random_instance(BALL, rng)
     return _generation(Scene(obj, ((cx, cy),), (depth,), size, mm_per_px,
-                             Effects(texture=False)), generator)
+                             Effects(texture=False)), generator, appearance)

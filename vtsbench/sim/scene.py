@@ -306,15 +306,18 @@ def render(scene: Scene, capture: Capture | None = None,
                                       shaded.patch, shaded.rows, shaded.cols)
         else:  # captured below, through the sensor's gel pattern and camera
             shots.append((shaded.patch, shaded.rows, shaded.cols))
-    surface = None
+    surface = rest = None
     if scene.path is not None and scene.mechanics is not None:
         from .mechanics import surface_displacement
 
-        surface = surface_displacement(contact, motion, pivot, scene.path, scene.mechanics,
-                                       scene.mm_per_px)
+        # from the unloaded gel (the pattern of a preloaded first frame is already displaced
+        # against the session's background); the truth is from frame 0
+        rest = surface_displacement(contact, motion, pivot, scene.path, scene.mechanics,
+                                    scene.mm_per_px, from_rest=True)
+        surface = rest - rest[0] if rest[0].any() else rest
     if scene.appearance is not None:
         from .appearance import capture as appearance_capture
 
         frames = appearance_capture(scene.appearance, fields, capture,
-                                    rng if eff.noise else None, shots, surface)
+                                    rng if eff.noise else None, shots, rest)
     return Rendered(frames, depth, grad, contact, motion, surface)

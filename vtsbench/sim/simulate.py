@@ -8,9 +8,11 @@ in a staging directory that takes its final name only when complete.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -32,6 +34,9 @@ from .plan import (
 )
 from .scene import Scene
 
+if TYPE_CHECKING:
+    from .appearance import Appearance
+
 SENSOR_ID = "vtsbench-sim"
 FPS = 30.0
 #: Read noise (DN) of a session is drawn uniformly from this range.
@@ -51,6 +56,8 @@ class Job:
     frames: int
     root: str
     generator: int = 1
+    #: Generator 2: the folder's sensor (its gel and imprint gain), shared by every entry.
+    appearance: Appearance | None = None
 
 
 def session_capture(seed: int, session: int) -> tuple[Capture, np.random.Generator]:
@@ -83,7 +90,7 @@ def _path_meta(scene: Scene) -> dict:
     """Generator-2 facts of a sequence for the manifest: speed profile, rotation over the
     window (deg, counter-clockwise), contact made or lost."""
     meta: dict = {}
-    if scene.path is not None:
+    if scene.path is not None and scene.effects.motion:
         meta["profile"] = scene.path.profile
         meta["turn_deg"] = _round(scene.path.rotations_deg[-1], 4)
         if scene.path.contact_change is not None:
@@ -104,11 +111,12 @@ def run_job(job: Job) -> Entry:
     motion = None
     gen = job.generator
     if plan.kind == "static":
-        scene = static_scene(plan, rng, job.size, job.mm_per_px, gen)
+        scene = static_scene(plan, rng, job.size, job.mm_per_px, gen, job.appearance)
     elif plan.kind == "sequence":
-        scene, motion = sequence_plan_scene(plan, rng, job.size, job.mm_per_px, job.frames, gen)
+        scene, motion = sequence_plan_scene(plan, rng, job.size, job.mm_per_px, job.frames, gen,
+                                            job.appearance)
     else:
-        scene = press_scene(rng, job.size, job.mm_per_px, gen)
+        scene = press_scene(rng, job.size, job.mm_per_px, gen, job.appearance)
     rendered = render(scene, job.capture, rng)
     truth = f"truth/{plan.id}.npz"
     write_truth(root / truth, Truth(rendered.depth_mm, rendered.grad, rendered.contact,
@@ -237,12 +245,15 @@ def simulate(out: str | Path, *, seed: int = 0, n_static: int = 30, n_sequences:
              n_presses: int = 20, n_objects: int = 15, size: tuple[int, int] = (480, 640),
              frames: int = 8, n_sessions: int = 3, mm_per_px: float = 0.03, workers: int = 1,
              overwrite: bool = False, progress: bool = False,
-             generator: int = DEFAULT_GENERATOR) -> Manifest:
+             generator: int = DEFAULT_GENERATOR, gel: str | None = None) -> Manifest:
     """Write a synthetic recordings folder with exact ground truth; returns its manifest.
 
     generator 1 is the first simulator (rigid shifts at constant speed, clean sensor), kept
     byte for byte; 2 adds contact mechanics, uneven speed, contact made or lost, the gel's
-    fixed pattern and a real camera (docs/simulator.md).
+    fixed pattern and a real camera (docs/simulator.md). A generator-2 folder is one sensor:
+    every session wears the same gel (`gel`: 'markers' or 'plain', default DEFAULT_GEL) with
+    one pattern and imprint gain drawn from the seed, so that the calibration presses and the
+    entries share them.
     """
     from ..atomic import staged_dir
     from ..recordings.manifest import save_manifest
@@ -256,6 +267,13 @@ def simulate(out: str | Path, *, seed: int = 0, n_static: int = 30, n_sequences:
     if generator not in GENERATORS:
         raise VtsError(f"--generator must be one of {', '.join(map(str, GENERATORS))}, "
                        f"got {generator}")
+    from .appearance import DEFAULT_GEL, GELS, sensor_appearance
+
+    if gel is not None and gel not in GELS:
+        raise VtsError(f"--gel must be one of {', '.join(GELS)}, got {gel!r}")
+    if gel is not None and generator < 2:
+        raise VtsError("--gel needs --generator 2 (generator 1 has a clean gel)")
+    app = sensor_appearance(gel or DEFAULT_GEL) if generator >= 2 else None
     plans = make_plans(seed, n_static, n_sequences, n_presses, n_objects, n_sessions)
     with staged_dir(out, overwrite, marker="recordings.json") as stage:
         sessions, captures = [], []
@@ -264,17 +282,20 @@ def simulate(out: str | Path, *, seed: int = 0, n_static: int = 30, n_sequences:
             sid = f"s{s:02d}"
             capture, rng = session_capture(seed, s)
             (stage / sid).mkdir()
-            if generator >= 2:  # the session's gel pattern and camera, as its entries show
-                from .appearance import Appearance, background
+            if app is not None:  # the sensor's one gel (number: the seed), as entries show it
+                from .appearance import background
+                from .camera import gel_gain
 
-                frame = background(Appearance(), fields, capture, rng)
+                capture = dataclasses.replace(capture, gel=seed)
+                frame = background(app, fields, capture, rng)
             else:
                 frame = capture_frame(fields, capture, rng)
             write_png(stage / sid / "background.png", frame)
             captures.append(capture)
             notes = f"simulated; read noise {capture.read_noise:g} DN"
             if generator >= 2:  # generator 1 folders carry no mark (their bytes are kept)
-                notes = f"simulated, generator {generator}; read noise {capture.read_noise:g} DN"
+                notes = (f"simulated, generator {generator}; {gel or DEFAULT_GEL} gel, imprint "
+                         f"gain {gel_gain(app, seed):.3f}; read noise {capture.read_noise:g} DN")
             sessions.append(Session(sid, SENSOR_ID, size, (mm_per_px, mm_per_px), FPS,
                                     f"{sid}/background.png", mount=Mount(), notes=notes))
         for sub, n in (("static", n_static), ("sequences", n_sequences), ("presses", n_presses),
@@ -282,7 +303,7 @@ def simulate(out: str | Path, *, seed: int = 0, n_static: int = 30, n_sequences:
             if n:
                 (stage / sub).mkdir()
         jobs = [Job(p, sessions[p.session].id, captures[p.session], seed, size, mm_per_px,
-                    frames, str(stage), generator) for p in plans]
+                    frames, str(stage), generator, app) for p in plans]
         entries = _run_jobs(jobs, workers, progress)
         used = ", ".join(c.name for c in OBJECTS[:n_objects])
         manifest = Manifest(

@@ -1,0 +1,170 @@
+"""Circle detection on presses of sensors it was never tuned on: rendered ball imprints under
+several light layouts, portrait and landscape, with a marker grid and JPEG compression, each
+with its known circle."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from vtsbench.depth.imprint import disc_search, marker_dots
+from vtsbench.depth.sphere import change_map, detect_circle, radius_range
+
+#: Light layouts: (colour RGB, azimuth deg, elevation deg) of each light.
+LAYOUTS = {
+    # three coloured side lights, low over the gel (GelSight R1.5, Mini): strong colour gradients
+    "side3": [((255, 40, 40), 90, 25), ((40, 255, 40), 210, 25), ((40, 40, 255), 330, 25)],
+    # rings of one colour each at three heights (DIGIT-like RGB rings)
+    "rings": [((230, 30, 30), a, 20) for a in range(0, 360, 45)]
+    + [((30, 230, 30), a, 45) for a in range(0, 360, 45)]
+    + [((30, 30, 230), a, 70) for a in range(0, 360, 45)],
+    # one white light above: the change grows with the slope only (weak at the apex)
+    "uniform": [((235, 235, 235), 0, 90)],
+}
+
+
+def _markers(h: int, w: int, pitch: float, dot: float) -> np.ndarray:
+    """A grid of dark dots (transmission 0.3 at their centre), soft-edged."""
+    yy, xx = np.mgrid[:h, :w].astype(np.float64)
+    dx = (xx - pitch / 3) % pitch
+    dy = (yy - pitch / 4) % pitch
+    d = np.hypot(np.minimum(dx, pitch - dx), np.minimum(dy, pitch - dy))
+    return 1.0 - 0.7 * np.clip(dot / 2 + 0.5 - d, 0, 1)
+
+
+def render(h: int, w: int, x: float, y: float, r: float, ball_px: float, layout: str, *,
+           markers: bool = False, jpeg: int | None = None, seed: int = 0,
+           press: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """(background, press) RGB uint8: a ball of ball_px pixels pressed to a contact of radius r
+    at (x, y), its gel shaded by the layout's lights, whose strength falls off across the frame
+    from the side each comes from; a skirt of a tenth of r outside the rim."""
+    ss = 2
+    yy, xx = np.mgrid[:h * ss, :w * ss].astype(np.float64)
+    xx, yy = (xx + 0.5) / ss - 0.5, (yy + 0.5) / ss - 0.5
+    rho = np.hypot(xx - x, yy - y)
+    root = np.sqrt(np.maximum(ball_px**2 - np.minimum(rho, r) ** 2, 1e-9))
+    rim = math.sqrt(ball_px**2 - r**2)
+    skirt = 0.1 * r
+    # the gel leaves the ball at the rim with a kink: its slope drops to 0.3 of the ball's
+    z = np.where(rho < r, root - rim,
+                 -0.3 * (r / rim) * skirt * (1 - np.exp(-(rho - r) / np.maximum(skirt, 1e-9))))
+    z = z if press else np.zeros_like(z)
+    gy, gx = np.gradient(z)
+    nrm = np.stack([gx * ss, gy * ss, np.ones_like(z)], -1)  # normal of depth z into the gel
+    nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
+    flat = np.array([0.0, 0.0, 1.0])
+    img, bg = np.zeros((h * ss, w * ss, 3)), np.zeros((h * ss, w * ss, 3))
+    for colour, az, el in LAYOUTS[layout]:
+        a, e = math.radians(az), math.radians(el)
+        light = np.array([math.cos(a) * math.cos(e), math.sin(a) * math.cos(e), math.sin(e)])
+        # falls off away from the side the light comes from (coloured side lights)
+        u = ((xx / w - 0.5) * math.cos(a) + (yy / h - 0.5) * math.sin(a)) if el < 85 else \
+            np.zeros_like(xx)
+        fall = 0.75 + 0.5 * u
+        col = np.array(colour, np.float64) / max(1, len(LAYOUTS[layout]) / 3)
+        img += col * (fall * np.clip(nrm @ light, 0, None))[..., None]
+        bg += col * (fall * max(0.0, float(flat @ light)))[..., None]
+    img = img.reshape(h, ss, w, ss, 3).mean(axis=(1, 3))
+    bg = bg.reshape(h, ss, w, ss, 3).mean(axis=(1, 3))
+    scale = 200 / max(float(bg.max()), 1.0)
+    img, bg = img * scale, bg * scale
+    if markers:
+        lay = _markers(h, w, pitch=0.45 * ball_px, dot=0.15 * ball_px)[..., None]
+        img, bg = img * lay, bg * lay
+    rng = np.random.default_rng(seed)
+    out = []
+    for a in (bg, img):
+        a = np.clip(a + rng.normal(0, 1.0, a.shape), 0, 255).round().astype(np.uint8)
+        if jpeg:
+            import cv2
+
+            _, buf = cv2.imencode(".jpg", a, [cv2.IMWRITE_JPEG_QUALITY, jpeg])
+            a = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
+        out.append(a)
+    return out[0], out[1]
+
+
+CASES = [(layout, shape, markers, jpeg) for layout in LAYOUTS
+         for shape in ((240, 320), (320, 240)) for markers, jpeg in ((False, None), (True, 75))]
+
+
+@pytest.mark.parametrize("layout, shape, markers, jpeg", CASES)
+def test_detection_holds_across_lights_orientation_markers_and_jpeg(layout, shape, markers,
+                                                                    jpeg) -> None:
+    """Within 1.5 px and 5 % of the rendered circle, for two contacts (one near the border)."""
+    h, w = shape
+    ball = 46.0  # a 2.35 mm ball at 19.6 px/mm
+    for x, y, r in ((0.45 * w + 0.3, 0.55 * h - 0.2, 40.0), (w - 50.4, 52.7, 30.5)):
+        bg, img = render(h, w, x, y, r, ball, layout, markers=markers, jpeg=jpeg)
+        found = detect_circle(img, bg, ball_px=ball)
+        assert found is not None, (layout, shape)
+        cx, cy, cr = found
+        assert math.hypot(cx - x, cy - y) < 1.5 and abs(cr / r - 1) < 0.05, (found, (x, y, r))
+
+
+@pytest.mark.parametrize("layout, dn", [("side3", 50), ("uniform", 25)])
+def test_a_light_drift_between_background_and_press_is_no_contact(layout, dn) -> None:
+    """The light changed smoothly across the frame between the background and the press (a
+    ramp of dn DN, a background taken at another time): the contact is found all the same (the
+    change map took the whole ramp for change before, and found no circle)."""
+    h, w, ball, (x, y, r) = 320, 240, 92.0, (118.4, 170.3, 38.0)  # a 4.7 mm ball
+    bg, img = render(h, w, x, y, r, ball, layout, jpeg=75)
+    ramp = dn * (np.arange(w) / w)[None, :, None] * np.array([1.0, -0.5, 0.3])
+    img = np.clip(img + ramp, 0, 255).astype(np.uint8)
+    found = detect_circle(img, bg, ball_px=ball)
+    assert found is not None
+    assert math.hypot(found[0] - x, found[1] - y) < 1.5 and abs(found[2] / r - 1) < 0.05, found
+    # and a frame of the drift alone has no contact
+    still = np.clip(bg + ramp, 0, 255).astype(np.uint8)
+    assert detect_circle(still, bg, ball_px=ball) is None
+
+
+def test_the_ball_bounds_the_radius() -> None:
+    """A 5 px imprint is a contact of an 8 px ball but not of a 46 px one: a contact radius
+    below 0.2 ball radii (a press a fiftieth of the ball deep) is not fitted (before, any
+    radius from 3 px was: circles of 3.4-7 px were found where the ball was 46 px)."""
+    bg, img = render(320, 240, 100.2, 150.7, 5.0, 8.0, "side3")
+    assert radius_range(46.0, 3.0, (320, 240)) == pytest.approx((9.2, 59.8))
+    assert detect_circle(img, bg, ball_px=46.0) is None
+    found = detect_circle(img, bg, ball_px=8.0)
+    assert found is not None and abs(found[2] - 5.0) < 0.5, found
+
+
+def test_a_strong_small_feature_does_not_win() -> None:
+    """A dark dot of dirt far stronger than the whole imprint, away from the contact: the circle
+    is the contact's, not the dot's (whose change is the strongest and most compact)."""
+    h, w, ball = 320, 240, 46.0
+    bg, img = render(h, w, 120.3, 200.6, 40.0, ball, "side3")
+    img = img.copy()
+    img[50:58, 60:68] = 0  # a dirt speck, 8 px
+    found = detect_circle(img, bg, ball_px=ball)
+    assert found is not None
+    assert math.hypot(found[0] - 120.3, found[1] - 200.6) < 1.5 and abs(found[2] / 40 - 1) < .05
+
+
+def test_no_contact_gives_no_circle() -> None:
+    for layout in LAYOUTS:
+        bg, img = render(240, 320, 150, 120, 40, 46.0, layout, press=False, markers=True,
+                         jpeg=75, seed=3)
+        assert detect_circle(img, bg, ball_px=46.0) is None, layout
+        assert disc_search(change_map(img, bg, 1.33, markers=True), (9.2, 60)) is None
+
+
+def test_marker_grid_is_found_and_leaves_no_pattern() -> None:
+    """The dots of the background are found with their size; on them the change map of a press
+    is as strong as around them (no holes where the dots are)."""
+    bg, img = render(240, 320, 160.2, 120.4, 40.0, 46.0, "side3", markers=True)
+    dots = marker_dots(bg)
+    assert dots is not None and 4 < dots[1] < 12  # drawn 6.9 px wide
+    assert marker_dots(render(240, 320, 0, 0, 1, 46.0, "side3", press=False)[0]) is None
+    _, plain = render(240, 320, 160.2, 120.4, 40.0, 46.0, "side3")
+    bg0, _ = render(240, 320, 160.2, 120.4, 40.0, 46.0, "side3")
+    truth = change_map(plain, bg0, 1.0)
+    ring = (truth > np.percentile(truth, 90))
+    with_dots = change_map(img, bg, 1.0, markers=True)
+    without = change_map(img, bg, 1.0, markers=False)
+    err_with = np.abs(with_dots - truth)[ring].mean()
+    err_without = np.abs(without - truth)[ring].mean()
+    assert err_with < 0.5 * err_without, (err_with, err_without)

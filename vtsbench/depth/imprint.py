@@ -1,0 +1,182 @@
+"""Where a ball press changed the gel's colour, before any edge is looked at: a change map that
+ignores a marker grid, and the disc that best explains the whole change.
+
+A marker gel carries small dark dots on a regular grid. Outside a contact they are the same in
+the press and the background, but their darkness scales every colour change that falls on them,
+so the change map shows holes where a dot lies (and specks where a dot moved). `marker_dots`
+finds the dots in the background (dark blobs well below their surroundings, many of one size);
+`change_map` divides the change on a dot by the dot's transmission and fills the darkest pixels
+from their surroundings (normalised convolution), so the map describes the imprint, not the
+grid.
+
+`disc_search` scores discs over the plausible radius range by how well the disc covers the
+changed pixels: +1 for a changed pixel inside it, -1 for an unchanged one. The best disc is the
+one the whole change supports, so a small strong feature (a dot of dirt, a saturated glint)
+cannot win over a contact many times its size, and a radius range taken from the ball and the
+scale keeps it from doing so even where the feature is stronger than the whole contact.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: Marker dots: blobs darker than DOT_DARK times their surroundings, at least DOT_MIN of them of
+#: areas within a factor of DOT_SPREAD of their median (a grid is many dots of one size).
+DOT_DARK, DOT_MIN, DOT_SPREAD = 0.8, 12, 3.0
+
+
+def _grey_and_level(background: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The background's grey level and its median over a window wider than any marker dot."""
+    import cv2
+
+    grey = background.astype(np.float32).mean(axis=-1) if background.ndim == 3 else \
+        background.astype(np.float32)
+    k = max(5, (min(grey.shape) // 6) | 1)  # wider than any dot a grid of DOT_MIN dots can hold
+    local = cv2.medianBlur(np.clip(grey, 0, 255).astype(np.uint8), min(k, 255))
+    return grey, np.maximum(local.astype(np.float32), 1.0)
+
+
+def marker_dots(background: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """(mask, diameter px) of the marker dots of a background frame, or None without a grid."""
+    import cv2
+
+    grey, local = _grey_and_level(background)
+    dark = (grey < DOT_DARK * local).astype(np.uint8)
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(dark, connectivity=8)
+    if n - 1 < DOT_MIN:
+        return None
+    area = stats[1:, cv2.CC_STAT_AREA].astype(np.float64)
+    med = float(np.median(area[area >= 3])) if (area >= 3).any() else 0.0
+    if med < 3:
+        return None
+    same = (area >= med / DOT_SPREAD) & (area <= med * DOT_SPREAD)
+    if same.sum() < DOT_MIN:
+        return None
+    keep = np.zeros(n, bool)
+    keep[1:] = area <= med * DOT_SPREAD  # small specks too; not a large dark region
+    grow = 2  # the dot's soft edge
+    mask = cv2.dilate(keep[lab].astype(np.uint8), cv2.getStructuringElement(
+        cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))).astype(bool)
+    return mask, 2 * math.sqrt(med / math.pi)
+
+
+#: On a dot, the change is divided by the dot's darkness (the dot scales the light that reaches
+#: the camera, in the press as in the background) down to this transmission; darker pixels
+#: are filled from around them.
+DOT_MIN_GAIN = 0.4
+
+
+def _fill(d: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
+    """d with the masked pixels replaced by the Gaussian-weighted mean of the unmasked ones."""
+    import cv2
+
+    keep = (~mask).astype(np.float32)
+    num = cv2.GaussianBlur(d * keep, (0, 0), sigma)
+    den = cv2.GaussianBlur(keep, (0, 0), sigma)
+    filled = num / np.maximum(den, 1e-12)
+    return np.where(mask & (den > 1e-12), filled, d).astype(np.float32)
+
+
+#: The smooth drift between a press and its background (light that changed, a background frame
+#: taken at another time, auto exposure) is a quadratic per channel fitted over a grid of about
+#: DRIFT_GRID cells a side, iterated DRIFT_ROUNDS times without the pixels that stand out of it.
+DRIFT_GRID, DRIFT_ROUNDS = 60, 4
+
+
+def drift(d: np.ndarray) -> np.ndarray:
+    """The smooth part (float32 H x W x C) of a signed colour difference `d` (H x W x C): a
+    quadratic in x and y per channel, robustly fitted (a press's imprint is left out as what
+    stands out of the fit), so that only a local change remains once it is taken off."""
+    h, w = d.shape[:2]
+    step = max(1, min(h, w) // DRIFT_GRID)
+    ys, xs = np.mgrid[step // 2:h:step, step // 2:w:step]
+    u, v = (xs.ravel() / w - 0.5) * 2, (ys.ravel() / h - 0.5) * 2
+    basis = np.column_stack([np.ones_like(u), u, v, u * u, u * v, v * v])
+    out = np.empty(d.shape, np.float32)
+    yy, xx = np.mgrid[:h, :w]
+    uu, vv = (xx.ravel() / w - 0.5) * 2, (yy.ravel() / h - 0.5) * 2
+    full = np.column_stack([np.ones_like(uu), uu, vv, uu * uu, uu * vv, vv * vv])
+    for c in range(d.shape[2]):
+        val = d[ys, xs, c].ravel().astype(np.float64)
+        keep = np.ones(val.size, bool)
+        coef = np.zeros(6)
+        for _ in range(DRIFT_ROUNDS):
+            if keep.sum() < 12:
+                break
+            coef, *_ = np.linalg.lstsq(basis[keep], val[keep], rcond=None)
+            res = val - basis @ coef
+            mad = float(np.median(np.abs(res[keep]))) * 1.4826
+            keep = np.abs(res) <= max(3 * mad, 2.0)
+        out[..., c] = (full @ coef).reshape(h, w)
+    return out
+
+
+def change_map(image: np.ndarray, background: np.ndarray, sigma: float,
+               dots: tuple[np.ndarray, float] | None = None) -> np.ndarray:
+    """Blurred sum over channels of |image - background - drift| (float32, H x W; `drift`: the
+    smooth light change between the two taken off). With `dots` (`marker_dots` of the
+    background) the change on a dot is divided by the dot's transmission (its grey level over
+    the level around it), and filled from around it where the dot is darker than
+    DOT_MIN_GAIN."""
+    import cv2
+
+    sd = image.astype(np.float32) - background.astype(np.float32)
+    if sd.ndim == 2:
+        sd = sd[..., None]
+    d = np.abs(sd - drift(sd)).sum(axis=-1)
+    if dots is not None:
+        mask, diameter = dots
+        grey, local = _grey_and_level(background)
+        gain = np.clip(grey / local, 0.0, 1.0)
+        d = np.where(mask & (gain >= DOT_MIN_GAIN), d / np.maximum(gain, DOT_MIN_GAIN), d)
+        d = _fill(d, mask & (gain < DOT_MIN_GAIN), max(1.0, diameter / 4))
+    return cv2.GaussianBlur(d, (0, 0), sigma) if sigma > 0 else d
+
+
+def noise_levels(m: np.ndarray) -> tuple[float, float]:
+    """(median, robust standard deviation) of a change map."""
+    med = float(np.median(m))
+    return med, float(np.median(np.abs(m - med))) * 1.4826 + 1e-3
+
+
+def changed(m: np.ndarray) -> np.ndarray:
+    """The pixels whose change stands above the noise and the sensor's small drifts (bool)."""
+    med, mad = noise_levels(m)
+    return m > max(med + 5 * mad, med + 4.0)
+
+
+def disc_search(m: np.ndarray, r_range: tuple[float, float], n_radii: int = 14
+                ) -> tuple[float, float, float, float] | None:
+    """(x, y, r, changed pixels in it) of the disc, radius within r_range, that best covers the
+    changed pixels of the change map `m` (+1 each changed pixel inside, -1 each unchanged one),
+    or None when no disc holds more changed pixels than unchanged ones. Searched on a grid
+    coarsened so the smallest radius spans about 5 cells."""
+    import cv2
+
+    b = changed(m)
+    if not b.any():
+        return None
+    r_lo, r_hi = float(r_range[0]), float(r_range[1])
+    f = max(1, int(r_lo // 5))
+    h, w = m.shape
+    a = b.astype(np.float32) * 2 - 1
+    if f > 1:
+        a = cv2.resize(a, (max(1, w // f), max(1, h // f)), interpolation=cv2.INTER_AREA)
+    best: tuple[float, float, float, float] | None = None
+    top = -math.inf
+    for r in np.geomspace(r_lo, max(r_hi, r_lo * 1.01), n_radii):
+        rc = r / f
+        k = math.ceil(rc)
+        yy, xx = np.mgrid[-k:k + 1, -k:k + 1]
+        disc = (np.hypot(xx, yy) <= rc).astype(np.float32)
+        s = cv2.filter2D(a, -1, disc, borderType=cv2.BORDER_CONSTANT)
+        i = int(np.argmax(s))
+        if float(s.flat[i]) > top:
+            top = float(s.flat[i])
+            yi, xi = divmod(i, s.shape[1])
+            best = ((xi + 0.5) * f - 0.5, (yi + 0.5) * f - 0.5, float(r), top * f * f)
+    if best is None or top <= 0:
+        return None
+    return best

@@ -1,0 +1,211 @@
+"""Marker gels: find the printed dots, and fill the gradient field over them.
+
+Many GelSight-type gels carry a grid of small dark dots (markers) to track shear. They are not
+surface shape: left in, the colour-to-gradient fit learns them as slopes, and the depth map and
+the flat gel around a press carry their pattern. So:
+
+1. `detect_markers(background, mm_per_px)` looks for a grid in the no-contact frame: dark blobs
+   against the local median of the grey level (a window of about 2.5 mm, from the scale),
+   round and of one consistent size. It returns a `MarkerSpec` (the dots' diameter and the
+   detection settings), or None when the gel shows no such dots.
+2. `marker_mask(images, spec, background_mask)` finds the dots in each frame (they move with
+   the gel under a press) with the same test, keeps the blobs of the calibrated size, joins the
+   dots of the background (the colour difference is disturbed there too) and grows the result
+   by the dots' soft edge and the feature blur.
+3. Calibration leaves the masked pixels out of the training samples; at run time
+   `fill_gradients` replaces the gradients over the mask by their harmonic fill from the
+   unmasked pixels around each dot (Laplace's equation over the hole, a sparse solve), before
+   the Poisson solve.
+
+OpenCV does the image work (medianBlur, connectedComponentsWithStats, dilate); scipy.sparse
+the fill.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+#: Side of the local-median window in mm (a few marker diameters; about one grid pitch).
+WINDOW_MM = 2.5
+#: A pixel is dark when its grey level is below (1 - CONTRAST) times the local median.
+CONTRAST = 0.15
+#: A grid: at least this many round blobs of one size in the background frame.
+MIN_DOTS = 6
+#: Blob area accepted around the median dot area (a dot is squeezed or stretched in a press).
+AREA_RANGE = (0.35, 2.5)
+
+
+@dataclass(frozen=True)
+class MarkerSpec:
+    """The marker dots of a gel, as found in its background frame."""
+
+    diameter_px: float  # median dot diameter (equal-area) in the background
+    window_px: int  # local-median window (odd)
+    contrast: float = CONTRAST
+    grow_px: int = 2  # mask growth beyond the thresholded dot (soft edge, feature blur)
+    n_dots: int = 0  # dots found in the background
+
+    @property
+    def area_px(self) -> float:
+        return math.pi * self.diameter_px**2 / 4
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"diameter_px": float(self.diameter_px), "window_px": int(self.window_px),
+                "contrast": float(self.contrast), "grow_px": int(self.grow_px),
+                "n_dots": int(self.n_dots)}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> MarkerSpec:
+        return cls(float(d["diameter_px"]), int(d["window_px"]), float(d["contrast"]),
+                   int(d["grow_px"]), int(d.get("n_dots", 0)))
+
+
+def window_px(mm_per_px: float | tuple[float, float], shape: tuple[int, int]) -> int:
+    """The local-median window (odd, 5 px up to half the shorter side) for a scale."""
+    mm = float(np.mean(mm_per_px)) if np.ndim(mm_per_px) else float(mm_per_px)
+    k = round(WINDOW_MM / mm)
+    k = max(5, min(k, min(shape) // 2))
+    return k | 1
+
+
+def _grey(image: np.ndarray) -> np.ndarray:
+    import cv2
+
+    img = np.ascontiguousarray(image)
+    if img.dtype != np.uint8:
+        img = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+    return cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if img.ndim == 3 else img
+
+
+def _dark_blobs(image: np.ndarray, window: int, contrast: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Labels (H, W) int32 of the dark blobs of one frame and their stats (n, 5) (cv2 layout:
+    x, y, width, height, area; row 0 the background)."""
+    import cv2
+
+    grey = _grey(image)
+    med = cv2.medianBlur(grey, window)
+    dark = (grey.astype(np.float32) < med.astype(np.float32) * np.float32(1 - contrast))
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(dark.view(np.uint8), connectivity=8,
+                                                           ltype=cv2.CV_32S)
+    return labels, stats
+
+
+def _round(stats: np.ndarray) -> np.ndarray:
+    """Which blobs are round enough for a dot: bounding box near square and well filled."""
+    w, h, area = stats[:, 2].astype(float), stats[:, 3].astype(float), stats[:, 4].astype(float)
+    aspect = np.maximum(w, h) / np.maximum(np.minimum(w, h), 1)
+    fill = area / np.maximum(w * h, 1)
+    return (aspect <= 2.0) & (fill >= 0.45)
+
+
+def detect_markers(background: np.ndarray, mm_per_px: float | tuple[float, float],
+                   contrast: float = CONTRAST, grow_px: int = 2) -> MarkerSpec | None:
+    """The gel's marker dots as seen in its no-contact frame (H, W, 3), or None: at least
+    MIN_DOTS round dark blobs of one size (within AREA_RANGE of their median), 2 px to 3 mm
+    across. grow_px: how far the mask reaches beyond a thresholded dot (the feature blur's
+    reach: 2 px for a 1 px blur)."""
+    shape = background.shape[:2]
+    win = window_px(mm_per_px, shape)
+    _, stats = _dark_blobs(background, win, contrast)
+    if stats.shape[0] <= 1:
+        return None
+    st = stats[1:]
+    mm = float(np.mean(mm_per_px)) if np.ndim(mm_per_px) else float(mm_per_px)
+    diam = np.sqrt(4 * st[:, 4] / math.pi)
+    ok = _round(st) & (diam >= 2.0) & (diam <= 3.0 / mm)
+    if ok.sum() < MIN_DOTS:
+        return None
+    med = float(np.median(st[ok, 4]))
+    same = ok & (st[:, 4] >= AREA_RANGE[0] * med) & (st[:, 4] <= AREA_RANGE[1] * med)
+    if same.sum() < MIN_DOTS or same.sum() < 0.6 * ok.sum():
+        return None
+    d = float(np.sqrt(4 * med / math.pi))
+    return MarkerSpec(diameter_px=d, window_px=win, contrast=contrast,
+                      grow_px=int(grow_px), n_dots=int(same.sum()))
+
+
+def _frame_mask(image: np.ndarray, spec: MarkerSpec) -> np.ndarray:
+    """The dots of one frame: dark round blobs of the spec's size (not grown)."""
+    labels, stats = _dark_blobs(image, spec.window_px, spec.contrast)
+    area = stats[:, 4]
+    h, w = labels.shape
+    # a dot cut by the frame's edge is neither round nor whole: any part of one will do
+    cut = (stats[:, 0] == 0) | (stats[:, 1] == 0) | (stats[:, 0] + stats[:, 2] == w) | \
+        (stats[:, 1] + stats[:, 3] == h)
+    keep = (_round(stats) & (area >= AREA_RANGE[0] * spec.area_px) | cut) & \
+        (area <= AREA_RANGE[1] * spec.area_px)
+    keep[0] = False
+    return keep[labels]
+
+
+def marker_mask(images: np.ndarray, spec: MarkerSpec,
+                background: np.ndarray | None = None) -> np.ndarray:
+    """(..., H, W) bool: the marker dots of each RGB frame (..., H, W, 3), joined with those of
+    the background frame when given, grown by spec.grow_px."""
+    import cv2
+
+    arr = np.asarray(images)
+    lead, (h, w) = arr.shape[:-3], arr.shape[-3:-1]
+    frames = arr.reshape(-1, h, w, arr.shape[-1])
+    base = None if background is None else _frame_mask(background, spec)
+    g = spec.grow_px
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * g + 1, 2 * g + 1))
+    out = np.empty((frames.shape[0], h, w), bool)
+    for k, f in enumerate(frames):
+        m = _frame_mask(f, spec)
+        if base is not None:
+            m |= base
+        out[k] = cv2.dilate(m.view(np.uint8), kernel).view(bool)
+    return out.reshape(*lead, h, w)
+
+
+def fill_gradients(g: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(..., H, W, 2) gradients with the masked pixels replaced by the harmonic fill of the
+    unmasked ones around them: Laplace's equation (5-point) over each hole, the hole's rim as
+    its boundary, so a linear field is filled exactly. A hole with no unmasked neighbour gets 0.
+    """
+    g = np.array(g, np.float32, copy=True)
+    h, w = g.shape[-3:-1]
+    gf = g.reshape(-1, h, w, 2)
+    mf = np.broadcast_to(mask, g.shape[:-1]).reshape(-1, h, w)
+    for k in range(gf.shape[0]):
+        if mf[k].any():
+            gf[k][mf[k]] = _harmonic(gf[k], mf[k])
+    return g
+
+
+def _harmonic(g: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """(n, 2) harmonic values at the n masked pixels of one frame (float32)."""
+    import scipy.sparse
+    import scipy.sparse.linalg
+
+    h, w = m.shape
+    ys, xs = np.nonzero(m)
+    n = ys.size
+    index = np.full((h, w), -1, np.int64)
+    index[ys, xs] = np.arange(n)
+    diag = np.full(n, 1e-9)  # a hole without unmasked neighbours is held at 0
+    rhs = np.zeros((n, 2))
+    rows, cols = [], []
+    ids = np.arange(n)
+    for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        ny, nx = ys + dy, xs + dx
+        inside = (ny >= 0) & (ny < h) & (nx >= 0) & (nx < w)
+        i, ny, nx = ids[inside], ny[inside], nx[inside]
+        diag[i] += 1.0
+        nb = index[ny, nx]
+        hole = nb >= 0
+        rows.append(i[hole])
+        cols.append(nb[hole])
+        np.add.at(rhs, i[~hole], g[ny[~hole], nx[~hole]].astype(np.float64))
+    r, c = np.concatenate(rows), np.concatenate(cols)
+    a = scipy.sparse.csc_matrix((np.concatenate([diag, -np.ones(r.size)]),
+                                 (np.concatenate([ids, r]), np.concatenate([ids, c]))),
+                                shape=(n, n))
+    out = scipy.sparse.linalg.splu(a).solve(rhs)
+    return out.astype(np.float32)
