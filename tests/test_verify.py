@@ -4,7 +4,6 @@ split files; exit 1 on any problem."""
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import pytest
@@ -16,11 +15,6 @@ from vtsbench.dataset.store import Layout
 from vtsbench.dataset.verify import chunk_of_byte, shard_index, verify
 
 pytest_plugins = ["test_build_helpers"]
-
-
-@pytest.fixture
-def ds(built: Path, tmp_path: Path) -> Path:
-    return Path(shutil.copytree(built, tmp_path / "ds"))
 
 
 def _flip(path: Path, offset: int) -> None:

@@ -24,7 +24,7 @@ from typing import Any
 from ..errors import VtsError
 from ..jsonio import MAX_FILE_BYTES
 
-#: meta/info.json, as schema.INFO_PATH (not imported: this module sits below schema and store).
+#: Where a dataset keeps its info.json (schema and every reader take it from here).
 INFO_PATH = "meta/info.json"
 
 CONNECT_TIMEOUT_ENV = "VTSBENCH_REMOTE_CONNECT_TIMEOUT"

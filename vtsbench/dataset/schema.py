@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..errors import VtsError
 from ..labels import STATES
+from .location import INFO_PATH
 
 if TYPE_CHECKING:
     import pyarrow
@@ -28,7 +29,6 @@ FORMAT_VERSION = "1.1"
 DEPTH_SCALE_MM = 0.001
 DEPTH_DTYPE = "int16"
 KINDS = ("static", "slip")
-INFO_PATH = "meta/info.json"
 SCHEMA_DIR = Path(__file__).resolve().parent.parent / "schemas"
 SCHEMA_NAMES = ("sample", "dataset_info", "split")
 DEFAULT_UNITS: dict[str, str] = {
