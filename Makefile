@@ -5,10 +5,8 @@ BIN    := $(VENV)/bin
 DEMO   ?= demo-data
 SEED   ?= 0
 WORKERS ?= 2
-STATIC ?= 300
-SEQUENCES ?= 360
 
-.PHONY: demo results results-demo test lint bench clean
+.PHONY: demo v2 results results-v2 test lint bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -17,17 +15,15 @@ $(VENV)/.installed: pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --disable-pip-version-check -q -e '.[dev,torch]'
 	touch $@
 
-## demo: the main job on the synthetic sensor: simulate -> check -> calibrate -> build -> verify ->
-## load -> train the small baselines -> predict -> eval -> leaderboard (the training part trains two
-## runs side by side, one torch thread each; see docs/results.md for its time)
+## demo: the main job on the synthetic sensor, the demo profile of benchmark v2 (the same
+## generator and sensor, fewer sequences): simulate + calibrate + build (`vtsbench benchmark
+## v2-demo`) -> check -> verify -> load -> train the small baselines -> predict -> eval ->
+## leaderboard (the training part trains two runs side by side, one torch thread each; see
+## docs/results.md for its time)
 demo: $(VENV)/.installed
-	$(BIN)/vtsbench simulate $(DEMO)/recordings --seed $(SEED) --static $(STATIC) \
-		--sequences $(SEQUENCES) --presses 20 --workers $(WORKERS) --overwrite --quiet
+	$(BIN)/vtsbench benchmark v2-demo $(DEMO) --seed $(SEED) --workers $(WORKERS) --overwrite --quiet
 	$(BIN)/vtsbench check $(DEMO)/recordings
 	$(BIN)/vtsbench preview $(DEMO)/recordings --out $(DEMO)/preview.png
-	$(BIN)/vtsbench calibrate $(DEMO)/recordings --out $(DEMO)/recordings/calibration.safetensors \
-		--method lut --holdout 4
-	$(BIN)/vtsbench build $(DEMO)/recordings $(DEMO)/dataset --workers $(WORKERS) --overwrite
 	$(BIN)/vtsbench verify $(DEMO)/dataset
 	$(BIN)/vtsbench info $(DEMO)/dataset
 	$(BIN)/python -c "import vtsbench; ds = vtsbench.load('$(DEMO)/dataset'); \
@@ -38,19 +34,25 @@ demo: $(VENV)/.installed
 		--leaderboards $(DEMO)/leaderboards --out $(DEMO)/results.md --retrain
 	@echo "demo done: recordings in $(DEMO)/recordings (contact sheet $(DEMO)/preview.png), calibration report in $(DEMO)/recordings/calibration.safetensors.report/, dataset in $(DEMO)/dataset, runs in $(DEMO)/runs, leaderboards in $(DEMO)/leaderboards, results table in $(DEMO)/results.md"
 
-## results-demo: the published demo-profile figures: the demo's dataset -> docs/results.md and
-## leaderboards/; with OCTOPI=folder of the octopi GelSight Mini videos, also ResNet on that data;
-## with OTHER=results.json (--summary of the same profile on a dataset of another seed), its table
-results-demo: $(VENV)/.installed
-	test -f $(DEMO)/dataset/meta/info.json || $(MAKE) demo
-	$(if $(OCTOPI),test -f $(DEMO)/octopi-dataset/meta/info.json || ( \
+## v2: benchmark v2 (3,600 sequences, 3,000 static frames at 240x320; about 2 GB dataset and
+## 9 GB recordings) in $(V2), and results-v2 its published figures: docs/results.md and
+## leaderboards/. With OTHER=results.json (--summary of the same runs on a dataset of another
+## seed, e.g. `vtsbench benchmark v2 v2-seed7 --seed 7` and --splits unseen_objects), its table.
+V2 ?= v2-data
+v2: $(VENV)/.installed
+	$(BIN)/vtsbench benchmark v2 $(V2) --workers $(WORKERS)
+
+## With OCTOPI=folder of the octopi GelSight Mini videos, also ResNet on that real data.
+results-v2: $(VENV)/.installed
+	test -f $(V2)/dataset/meta/info.json || $(MAKE) v2
+	$(if $(OCTOPI),test -f $(V2)/octopi-dataset/meta/info.json || ( \
 		$(BIN)/vtsbench manifest $(OCTOPI) --pattern '{object}_{session:d}.mov' --kind static \
-			--stride 20 --sensor gelsight-mini --out $(DEMO)/octopi --overwrite && \
-		$(BIN)/vtsbench build $(DEMO)/octopi $(DEMO)/octopi-dataset --no-depth \
+			--stride 20 --sensor gelsight-mini --out $(V2)/octopi --overwrite && \
+		$(BIN)/vtsbench build $(V2)/octopi $(V2)/octopi-dataset --no-depth \
 			--workers $(WORKERS) --overwrite ))
-	$(BIN)/python benchmarks/results.py --dataset $(DEMO)/dataset --runs $(DEMO)/runs \
-		--leaderboards leaderboards --out docs/results.md --profile demo \
-		--summary $(DEMO)/results.json $(if $(OCTOPI),--octopi $(DEMO)/octopi-dataset) \
+	$(BIN)/python benchmarks/results.py --dataset $(V2)/dataset --runs $(V2)/runs \
+		--leaderboards leaderboards --out docs/results.md --profile v2 \
+		--summary $(V2)/results.json $(if $(OCTOPI),--octopi $(V2)/octopi-dataset) \
 		$(if $(OTHER),--other $(OTHER))
 
 ## results: the paper-scale profile: ~8,000 sequences and ~19,000 static frames simulated, the

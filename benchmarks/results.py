@@ -44,6 +44,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from machine import machine  # noqa: E402
+from slip_effects import effect_table, slip_truth, submission_hits, wilson  # noqa: E402
 
 #: The paper's figures (accuracy %), its own recordings and splits: a reference, not an entry.
 PAPER = {
@@ -65,17 +66,24 @@ class Run:
     dataset: str = "synthetic"   # which dataset (key of the --dataset/--octopi paths)
 
 
-#: The demo profile's configs (CPU, 2 cores, the whole `make demo` under 15 minutes).
-DEMO_TSF = {"config": "small", "modality": "rgb", "image_size": 64, "crop_px": 256,
-            "input": "delta+flow", "flow": "shift", "flow_soft_px": 0.5, "pool": "cls+mean",
+#: The demo profile's configs (CPU, 2 cores, the whole `make demo` under 15 minutes), sized for
+#: the benchmark's sensor (240x320 at 0.06 mm/px): a 128 px crop is 7.7 mm of gel around the
+#: contact. The motion channels are the crop's dense DIS flow (`flow: dis`) kept where the gel
+#: is in contact (`flow_mask: contact`): on generator-2 slips the whole-crop `shift` locks onto
+#: the gel's fixed pattern like any registration, and the still gel dilutes a dense flow.
+DEMO_TSF = {"config": "small", "modality": "rgb", "image_size": 64, "crop_px": 128,
+            "input": "delta+flow", "flow": "dis", "flow_mask": "contact", "pool": "cls+mean",
             "steps": 300, "batch_size": 8,
             "checkpoint_every": 100, "fit_parts": ["train", "val"]}
-DEMO_RESNET = {"arch": "resnet18", "image_size": 128, "crop_px": 320, "steps": 300,
+DEMO_RESNET = {"arch": "resnet18", "image_size": 128, "crop_px": 160, "steps": 300,
                "batch_size": 16, "checkpoint_every": 100, "gradcam": 4,
                "fit_parts": ["train", "val"]}
 #: Steps per modality in the demo: depth (one channel, no colour) needs twice RGB's to pass 85 %
 #: (docs/models.md, "Which knob buys how much").
 DEMO_RESNET_STEPS = {"rgb": 300, "depth": 600}
+#: The v2 profile: the published benchmark (`vtsbench benchmark v2`: 3,600 sequences, 3,000
+#: static frames) with the demo's model sizes trained longer, on 2 CPU cores.
+V2_STEPS = {"timesformer": 1500, "resnet": {"rgb": 600, "depth": 1200}}
 #: The results profile (paper scale: ~8,000 sequences, ~19,000 static frames, paper-size
 #: models): steps on a GPU, and the fewer steps it falls back to on a CPU (the page says so).
 PAPER_TSF = {"config": "paper", "modality": "rgb", "crop_px": 256,
@@ -99,9 +107,22 @@ def profile_runs(profile: str, octopi: bool, *, gpu: bool = False,
     `pretrained`: folder of the SSv2 TimeSformer weights (results profile; without it the
     paper-size TimeSformer starts from random weights, and the page says so)."""
     runs = []
-    if profile == "demo":
+    if profile == "v2":
         for split in ("unseen_objects", "seen"):
-            runs.append(Run("flow-shift", "flow", split, {"scale": 0.25}))
+            runs.append(Run("flow-contact", "flow", split, {"scale": 0.25}))
+            runs.append(Run("timesformer-small-rgb", "timesformer", split,
+                            {**DEMO_TSF, "steps": V2_STEPS["timesformer"],
+                             "checkpoint_every": 250}))
+        runs.append(Run("timesformer-small-depth", "timesformer", "unseen_objects",
+                        {**DEMO_TSF, "modality": "depth", "steps": V2_STEPS["timesformer"],
+                         "checkpoint_every": 250}))
+        for mod in ("rgb", "depth"):
+            runs.append(Run(f"resnet18-{mod}", "resnet", "static_sessions",
+                            {**DEMO_RESNET, "modality": mod,
+                             "steps": V2_STEPS["resnet"][mod], "checkpoint_every": 200}))
+    elif profile == "demo":
+        for split in ("unseen_objects", "seen"):
+            runs.append(Run("flow-contact", "flow", split, {"scale": 0.25}))
             runs.append(Run("timesformer-small-rgb", "timesformer", split, dict(DEMO_TSF)))
         for mod in ("rgb", "depth"):
             runs.append(Run(f"resnet18-{mod}", "resnet", "static_sessions",
@@ -115,7 +136,7 @@ def profile_runs(profile: str, octopi: bool, *, gpu: bool = False,
                "tta": gpu,
                "pretrained": pretrained is not None}
         for split in ("unseen_objects", "seen"):
-            runs.append(Run("flow-shift", "flow", split, {"scale": 0.25}))
+            runs.append(Run("flow-contact", "flow", split, {"scale": 0.25}))
             runs.append(Run("timesformer-base-rgb", "timesformer", split, dict(tsf)))
         runs.append(Run("timesformer-base-depth", "timesformer", "seen",
                         {**tsf, "modality": "depth"}))
@@ -172,16 +193,25 @@ def run_one(run: Run, ds: Path, runs_dir: Path, boards: Path, retrain: bool,
         train_s = run_cli(*train_args, log=log)
         (out / "train_seconds.txt").write_text(f"{train_s:.1f}\n")
     sub = runs_dir / f"{name}.csv"
-    run_cli("predict", run.recipe, str(out / "checkpoint.safetensors"), "--dataset", str(ds),
-             "--split", run.split, "--out", str(sub), "--method", run.method, log=log)
-    run_cli("eval", str(sub), "--dataset", str(ds), "--split", run.split,
-             "--out", str(runs_dir / f"{name}.eval"), log=log)
+    ckpt = out / "checkpoint.safetensors"
+    scored = runs_dir / f"{name}.eval" / "metrics.json"
+    # a submission newer than its checkpoint, scored after it was written, is reused: a rerun
+    # that only adds a table costs no prediction
+    if not (sub.exists() and sub.with_suffix(".meta.json").exists() and scored.exists()
+            and ckpt.stat().st_mtime < sub.stat().st_mtime <= scored.stat().st_mtime):
+        run_cli("predict", run.recipe, str(ckpt), "--dataset", str(ds),
+                "--split", run.split, "--out", str(sub), "--method", run.method, log=log)
+        run_cli("eval", str(sub), "--dataset", str(ds), "--split", run.split,
+                "--out", str(runs_dir / f"{name}.eval"), log=log)
     meta = json.loads(sub.with_suffix(".meta.json").read_text())
     metrics = json.loads((runs_dir / f"{name}.eval" / "metrics.json").read_text())
-    # one entry per method and split: a re-run replaces the method's earlier entry
+    # one entry per method, split and dataset version: a re-run replaces the method's earlier
+    # entry on the same version; entries on an earlier version stay (listed apart)
     board = boards / metrics["dataset"]["name"] / run.split
+    version = metrics["dataset"]["dataset_version"]
     for old in board.glob(f"{run.method}-*.json"):
-        old.unlink()
+        if json.loads(old.read_text())["dataset"]["dataset_version"] == version:
+            old.unlink()
     run_cli("leaderboard", "add", str(sub), "--dataset", str(ds), "--split", run.split,
              "--root", str(boards), "--overwrite", log=log)
     tasks = metrics["tasks"]
@@ -211,8 +241,15 @@ def run_one(run: Run, ds: Path, runs_dir: Path, boards: Path, retrain: bool,
         "n_dir": tasks["direction"]["runs"][0]["n"] if "direction" in tasks else None,
         "object": acc("object"), "dataset_name": metrics["dataset"]["name"],
         "dataset_sha": metrics["dataset"]["dataset_sha256"],
-        "checkpoint": str(out / "checkpoint.safetensors"),
+        "checkpoint": str(out / "checkpoint.safetensors"), "submission": str(sub),
+        "direction_ci": _ci(tasks, "direction"), "state_ci": _ci(tasks, "state"),
     }
+
+
+def _ci(tasks: dict[str, Any], task: str) -> list[float] | None:
+    """The 95 % interval (%) of a task's accuracy (state given for direction), or None."""
+    ci = tasks.get(task, {}).get("runs", [{}])[0].get("accuracy_ci95")
+    return None if ci is None else [100.0 * ci[0], 100.0 * ci[1]]
 
 
 def phase_reference(dataset: Path, split: str) -> dict[str, Any]:
@@ -242,8 +279,11 @@ def phase_reference(dataset: Path, split: str) -> dict[str, Any]:
         ok.append(pred == s["direction"])
         ids.append(s["sample_id"])
     mm, px = distances(slip_motion(dataset, ids))
+    ci = wilson(int(sum(ok)), len(ok))
     return {"split": split, "n_dir": len(ok),
             "direction": 100.0 * float(np.mean(ok)) if ok else None,
+            "direction_ci": None if ci is None else [100.0 * ci[0], 100.0 * ci[1]],
+            "hits": dict(zip(ids, map(bool, ok), strict=True)),
             "latency_ms": 1000 * statistics.median(times) if times else None,
             "by_magnitude": by_magnitude(ok, mm, px)}
 
@@ -363,31 +403,34 @@ def render(rows: list[dict[str, Any]], paper_rows: list[dict[str, Any]], info: d
         "## Slip: state and direction",
         "",
         "| method | split | device | params | latency ms | train s | state % | direction % "
-        "(state given) | direction % end to end | within one bin % | adjacent share of errors "
-        "% | angular error deg | test n (slipping) |",
-        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "(state given) | 95 % interval | direction % end to end | within one bin % | adjacent "
+        "share of errors % | angular error deg | test n (slipping) |",
+        "|---|---|---|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|",
     ]
     for r in slip:
         params = f"{r['params']} tree nodes" if r["run"].recipe == "flow" else _m(r["params"])
         lines.append(
             f"| {r['run'].method} | {r['run'].split} | {r.get('device', 'cpu')} | {params} | "
             f"{_ms(r['latency_ms'])} | {_ms(r['train_s'])} | {_pct(r['state'])} | "
-            f"{_pct(r['direction'])} | {_pct(r['direction_e2e'])} | {_pct(r['within_one'])} | "
+            f"{_pct(r['direction'])} | {_interval(r.get('direction_ci'))} | "
+            f"{_pct(r['direction_e2e'])} | {_pct(r['within_one'])} | "
             f"{_pct(r.get('adjacent'))} | "
             f"{'-' if r['angular'] is None else round(r['angular'])} | "
             f"{r['n']} ({r['n_dir']}) |")
     for ref in info.get("references", []):
         lines.append(f"| phase correlation, first and last frame (reference) | {ref['split']} | "
                      f"cpu | none | {_ms(ref['latency_ms'])} | - | - | "
-                     f"{_pct(ref['direction'])} | - | - | - | - | - ({ref['n_dir']}) |")
+                     f"{_pct(ref['direction'])} | {_interval(ref.get('direction_ci'))} | - | - "
+                     f"| - | - | - ({ref['n_dir']}) |")
     for p in paper_rows:
         if p["kind"] == "slip":
             for split in ("seen", "unseen_objects"):
                 ref = PAPER[("slip", split)]
                 lines.append(f"| {p['name']} | {split} (paper's data) | {p['device']} | "
                              f"{_m(p['params'])} | {_ms(p['latency_ms'])} | - | {ref['state']} | "
-                             f"{ref['direction']} | - | - | mostly adjacent | - | - |")
+                             f"{ref['direction']} | - | - | - | mostly adjacent | - | - |")
     lines += magnitude_tables(slip, info.get("references", []))
+    lines += effect_tables(slip, info.get("references", []), info.get("effects", {}))
     lines += state_table(slip)
     lines += ["", "## Static: object recognition", "",
               "| method | dataset / split | classes | params | CPU latency ms | train s | "
@@ -416,6 +459,30 @@ def render(rows: list[dict[str, Any]], paper_rows: list[dict[str, Any]], info: d
         + ".",
         "", "Commands run:", "", "```bash"] + commands + ["```", ""]
     return "\n".join(lines)
+
+
+def _interval(ci: list[float] | None) -> str:
+    return "-" if ci is None else f"[{ci[0]:.1f}, {ci[1]:.1f}]"
+
+
+def effect_tables(slip: list[dict[str, Any]], refs: list[dict[str, Any]],
+                  truths: dict[str, dict[str, Any]]) -> list[str]:
+    """Per split: direction accuracy (state given) by what the simulator did to the sequence,
+    for every slip run and the phase-correlation reference (95 % Wilson intervals)."""
+    out: list[str] = []
+    for split, truth in truths.items():
+        runs = [r for r in slip if r["run"].split == split and r.get("submission")]
+        ref = next((x for x in refs if x["split"] == split), None)
+        if not runs or not truth:
+            continue
+        cols = [(f"{r['run'].method} %", submission_hits(Path(r["submission"]), truth))
+                for r in runs]
+        if ref and ref.get("hits"):
+            cols.append(("phase correlation reference %", ref["hits"]))
+        out += ["", f"Direction by effect, {split} (state given; slipping test sequences; "
+                "accuracy % [95 % Wilson interval]; the effects are the simulator's own record "
+                "of each sequence in the index):", "", *effect_table(truth, cols)]
+    return out
 
 
 def magnitude_tables(slip: list[dict[str, Any]], refs: list[dict[str, Any]]) -> list[str]:
@@ -494,10 +561,18 @@ def findings(rows: list[dict[str, Any]], paper: list[dict[str, Any]],
                 continue
             text = (f"- {split}, {r['run'].method}: direction {r['direction']:.1f} % with the "
                     f"state given ({r['n_dir']} slipping test sequences; chance 12.5 %)")
+            if r.get("direction_ci"):
+                text += f" [95 % interval {r['direction_ci'][0]:.1f}-{r['direction_ci'][1]:.1f}]"
             if ref and ref["direction"] is not None:
                 gap = r["direction"] - ref["direction"]
                 text += (f", {abs(gap):.1f} points {'above' if gap >= 0 else 'below'} the phase "
-                         f"correlation of the first and last frame ({ref['direction']:.1f} %)")
+                         f"correlation of the first and last frame ({ref['direction']:.1f} %")
+                if r.get("direction_ci") and ref.get("direction_ci"):
+                    apart = (r["direction_ci"][0] > ref["direction_ci"][1]
+                             or r["direction_ci"][1] < ref["direction_ci"][0])
+                    text += (f" [{ref['direction_ci'][0]:.1f}-{ref['direction_ci'][1]:.1f}]; the "
+                             f"intervals {'do not overlap' if apart else 'overlap'}")
+                text += ")"
             text += f"; the paper's TimeSformer {p['direction']} % on its own data"
             if r["state"] is not None:
                 text += f". State {r['state']:.1f} % (paper {p['state']} %)"
@@ -506,6 +581,17 @@ def findings(rows: list[dict[str, Any]], paper: list[dict[str, Any]],
             elif r["direction"] == 100.0:
                 text += "; no direction error"
             out.append(text + ".")
+    for split in ("unseen_objects", "seen"):
+        by_mod = {r["run"].config.get("modality", "rgb"): r for r in rows
+                  if r["run"].recipe == "timesformer" and r["run"].split == split
+                  and r["direction"] is not None}
+        if "rgb" in by_mod and "depth" in by_mod:
+            rgb, dep = by_mod["rgb"], by_mod["depth"]
+            word = "above" if rgb["direction"] > dep["direction"] else "not above"
+            out.append(f"- {split}: TimeSformer on RGB {rgb['direction']:.1f} % direction, "
+                       f"{word} the same model on depth alone ({dep['direction']:.1f} %); state "
+                       f"{_pct(rgb['state'])} against {_pct(dep['state'])} %. The paper's pattern "
+                       "is RGB above depth-only.")
     flows = [r for r in rows if r["run"].recipe == "flow" and r["latency_ms"]]
     tsfs = [r for r in rows if r["run"].recipe == "timesformer" and r["latency_ms"]]
     if flows and tsfs:
@@ -543,6 +629,12 @@ def no_gpu() -> bool:
 
 def steps_note(profile: str, gpu: bool, pretrained: str | None) -> str:
     """What the page must say about the compute its figures had."""
+    if profile == "v2":
+        return ("v2 profile: the published benchmark (`vtsbench benchmark v2`), models of the "
+                "demo's size trained longer on 2 CPU cores "
+                f"({V2_STEPS['timesformer']} TimeSformer steps, ResNet "
+                f"{V2_STEPS['resnet']['rgb']} on RGB and {V2_STEPS['resnet']['depth']} on depth); "
+                "the paper-scale results profile (`make results`) was not run for this page.")
     if profile == "demo":
         return ("Demo profile: CPU-sized models and steps (what `make demo` trains on 2 CPU "
                 "cores); the paper-scale results profile (`make results`) was not run for this "
@@ -566,7 +658,10 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "results.md")
     ap.add_argument("--octopi", type=Path, default=None,
                     help="static RGB build of real videos (held-out takes in static_sessions)")
-    ap.add_argument("--profile", choices=("demo", "results"), default="demo")
+    ap.add_argument("--profile", choices=("demo", "v2", "results"), default="demo")
+    ap.add_argument("--splits", default=None,
+                    help="comma-separated splits to run (default: all of the profile's), e.g. "
+                         "unseen_objects for a check on a dataset of another seed")
     ap.add_argument("--retrain", action="store_true", help="train every run afresh")
     ap.add_argument("--repeats", type=int, default=5, help="forward passes timed per paper model")
     ap.add_argument("--jobs", type=int, default=None,
@@ -598,6 +693,9 @@ def main() -> None:
     device = "cuda" if gpu else "cpu"
     runs = profile_runs(args.profile, args.octopi is not None, gpu=gpu,
                         pretrained=args.pretrained)
+    if args.splits:
+        keep = set(args.splits.split(","))
+        runs = [r for r in runs if r.split in keep]
     if args.steps is not None:  # a smoke run: every trained run with this many steps
         runs = [Run(r.method, r.recipe, r.split, {**r.config, "steps": args.steps}
                     if "steps" in r.config else r.config, r.dataset) for r in runs]
@@ -608,7 +706,7 @@ def main() -> None:
     # longest first, so that the last run to start is a short one and neither worker idles
     # while the other trains a long run alone
     order = sorted(range(len(runs)), key=lambda k: -expected_cost(runs[k]))
-    jobs = args.jobs or (2 if args.profile == "demo" and no_gpu() else 1)
+    jobs = args.jobs or (2 if args.profile in ("demo", "v2") and no_gpu() else 1)
     with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
         started = list(pool.map(lambda k: run_one(runs[k], paths[runs[k].dataset], args.runs,
                                                   args.leaderboards, args.retrain, logs[k]),
@@ -627,7 +725,9 @@ def main() -> None:
             r["n_slip_train"] = train.index["state"].to_pylist().count("slip")
         r["device"] = device if run.recipe != "flow" else "cpu"
         rows.append(r)
-    refs = [phase_reference(args.dataset, split) for split in ("unseen_objects", "seen")]
+    splits = [sp for sp in ("unseen_objects", "seen") if any(r.split == sp for r in runs)]
+    refs = [phase_reference(args.dataset, split) for split in splits]
+    effects = {sp: slip_truth(args.dataset, sp) for sp in splits} if args.profile == "v2" else {}
     run_cli("leaderboard", "render", "--root", str(args.leaderboards), log=log)
     devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
     paper_rows = []
@@ -649,7 +749,8 @@ def main() -> None:
                ["no GPU on this machine"])),
         "dataset_name": rows[0]["dataset_name"], "dataset_sha": rows[0]["dataset_sha"],
         "dataset_desc": counts, "findings": findings(rows, paper_rows, refs),
-        "references": refs, "steps_note": steps_note(args.profile, gpu, args.pretrained)
+        "references": refs, "effects": effects,
+        "steps_note": steps_note(args.profile, gpu, args.pretrained)
         + ("" if args.steps is None else f" Smoke run: every model trained for only "
            f"{args.steps} steps (--steps), so its figures say nothing of the recipe."),
         "other": None if args.other is None else json.loads(args.other.read_text()),
@@ -665,7 +766,8 @@ def main() -> None:
         args.summary.write_text(json.dumps(
             {"dataset_sha256": info["dataset_sha"], "profile": args.profile,
              "label": f"{info['dataset_desc']}; ",
-             "elapsed_s": round(elapsed, 1), "references": refs,
+             "elapsed_s": round(elapsed, 1),
+             "references": [{k: v for k, v in r.items() if k != "hits"} for r in refs],
              "rows": [{k: v for k, v in r.items() if k not in ("run", "checkpoint")}
                       | {"method": r["run"].method, "split": r["run"].split}
                       for r in rows]}, indent=1, default=str) + "\n")

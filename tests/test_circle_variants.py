@@ -9,7 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from vtsbench.depth.imprint import disc_search, marker_dots
+from vtsbench.depth.imprint import disc_search
+from vtsbench.depth.markers import marker_dots
 from vtsbench.depth.sphere import change_map, detect_circle, radius_range
 
 #: Light layouts: (colour RGB, azimuth deg, elevation deg) of each light.

@@ -224,3 +224,23 @@ def test_shift_channels_follow_the_motion_of_an_elongated_imprint() -> None:
     assert angle_to_class(math.degrees(math.atan2(-fy, fx)) % 360) == 0
     px = FLOW_SOFT_PX * np.arctanh(min(float(mag.max()), 0.999999))
     assert px == pytest.approx(10.0 * sx, abs=0.5)
+
+
+def test_flow_mask_keeps_the_flow_only_where_the_gel_is_in_contact() -> None:
+    """`flow_mask`: the dis channels are zero outside the union of the contact masks and the same
+    as without the mask inside it; no contact masks keep everything."""
+    from vtsbench.models.contact_crop import contact_mask
+
+    seq = moving_blob(4, 0)
+    contact = np.zeros(seq.shape[:3], bool)
+    contact[:, 15:35, 40:65] = True
+    s = {"rgb": seq, "contact": contact}
+    free, _ = contact_crop(s, 40, 40, "rgb", flow="dis")
+    masked, _ = contact_crop(s, 40, 40, "rgb", flow="dis", flow_mask=True)
+    box = crop_box(crop_center(seq, contact), 40, seq.shape[1:3])
+    m = contact_mask(s, box, 40).astype(bool)
+    assert 0 < m.sum() < m.size
+    assert np.array_equal(masked[:, :3], free[:, :3])
+    assert np.all(masked[:, 3:][:, :, ~m] == 0.0)
+    assert np.allclose(masked[:, 3:][:, :, m], free[:, 3:][:, :, m])
+    assert contact_mask({"rgb": seq}, box, 40).min() == 1.0

@@ -136,3 +136,31 @@ def test_leaderboard_add_render_rescore(vts_dataset: Path, tmp_path: Path,
     assert e["rescored_from"] == ["1.0"] and e["metric_version"] == "1.1"
     res = runner.invoke(app, ["leaderboard", "render", "--root", str(root)])
     assert res.exit_code == 0 and "12.50" in res.output
+
+
+def test_leaderboard_ranks_the_newest_dataset_version(vts_dataset: Path, tmp_path: Path) -> None:
+    """Entries scored on an earlier dataset version are listed apart, not ranked with the
+    current ones; the newest version present is the current one (2.0.0 after 1.0.0, a release
+    after its pre-release, build metadata ignored)."""
+    from vtsbench.evaluation import leaderboard
+
+    split, part = slip_split(vts_dataset)
+    root = tmp_path / "lb"
+    for method, wrong in (("old-good", 0), ("new-worse", 1)):
+        sub = write_submission(vts_dataset, tmp_path / method, split, part, wrong, method)
+        res = runner.invoke(app, ["leaderboard", "add", str(sub), "--dataset", str(vts_dataset),
+                                  "--split", split, "--part", part, "--root", str(root)])
+        assert res.exit_code == 0, res.output
+    folder = root / load_info(vts_dataset).name / split
+    for p in folder.glob("new-worse-*.json"):
+        doc = json.loads(p.read_text())
+        doc["dataset"]["dataset_version"] = "2.0.0"
+        p.write_text(json.dumps(doc))
+    md = leaderboard.render_folder(folder)
+    ranked, _, earlier = md.partition("## Scored on an earlier dataset version")
+    assert "Dataset version 2.0.0: 1 entries" in ranked and "| new-worse |" in ranked
+    assert "old-good" not in ranked
+    assert "| 1.0.0 | old-good |" in earlier and "version 2.0.0 is current" in earlier
+    key = leaderboard._version_key
+    assert key("2.0.0") > key("2.0.0-rc1") > key("1.10.0") > key("1.9.0")
+    assert key("2.0.0+demo") == key("2.0.0")

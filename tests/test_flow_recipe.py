@@ -87,3 +87,71 @@ def test_flow_directions_well_above_chance(vts_dataset: Path, tmp_path: Path) ->
     assert total >= 3
     assert hits / total > 3 / 8  # chance is 1/8
     assert math.isfinite(float(np.median(rec.latency_s)))
+
+
+def _imprint_over_fixed_pattern(dx: int, dy_rows: int, frames: int = 6, lost_at: int | None = None
+                                ) -> tuple[np.ndarray, np.ndarray]:
+    """A textured disc (the imprint) moving by (dx, dy_rows) px a frame over a strong fixed
+    pattern that does not move, and its contact masks; contact lost from frame `lost_at`."""
+    import cv2
+
+    rng = np.random.default_rng(1)
+    pattern = cv2.GaussianBlur(rng.integers(0, 255, (120, 160), dtype=np.uint8), (0, 0), 1.0)
+    texture = cv2.GaussianBlur(rng.integers(0, 255, (120, 160), dtype=np.uint8), (0, 0), 1.5)
+    yy, xx = np.mgrid[0:120, 0:160]
+    out, masks = [], []
+    for t in range(frames):
+        cx, cy = 70 + dx * t, 60 + dy_rows * t
+        m = (xx - cx) ** 2 + (yy - cy) ** 2 < 20 ** 2
+        if lost_at is not None and t >= lost_at:
+            m[:] = False
+        tex = cv2.warpAffine(texture, np.float32([[1, 0, dx * t], [0, 1, dy_rows * t]]),
+                             (160, 120), borderMode=cv2.BORDER_REFLECT)
+        f = pattern.astype(np.float32) * 0.8
+        f[m] = 0.1 * f[m] + 0.9 * tex[m]  # the imprint outshines the pattern under it
+        out.append(np.repeat(np.clip(f, 0, 255).astype(np.uint8)[:, :, None], 3, axis=2))
+        masks.append(m)
+    return np.stack(out), np.stack(masks)
+
+
+@pytest.mark.parametrize(("dx", "dy_rows", "cls"), [(1, 0, 0), (0, -1, 2), (-1, 1, 5)])
+def test_contact_direction_reads_the_imprint_not_the_fixed_pattern(dx: int, dy_rows: int,
+                                                                    cls: int) -> None:
+    """The `contact` rule follows the imprint over a fixed pattern that holds a whole-frame
+    phase correlation at zero; frames out of contact at the end are left out; without a
+    contact mask the phase rule decides."""
+    import sys
+
+    import cv2
+
+    flow_mod = sys.modules[type(load_recipe(FLOW)).__module__]
+    rgb, contact = _imprint_over_fixed_pattern(dx, dy_rows)
+    g = [cv2.cvtColor(f, cv2.COLOR_RGB2GRAY).astype(np.float32) for f in (rgb[0], rgb[-1])]
+    (sx, sy), _ = cv2.phaseCorrelate(g[0], g[1])
+    assert math.hypot(sx, sy) < 1.0  # the registration locks onto the fixed pattern
+    cfg = {**load_recipe(FLOW).default_config()}
+    assert cfg["direction"] == "contact"
+    _, angle = flow_mod.sequence_features(rgb, cfg, contact)
+    assert angle_to_class(angle) == cls
+    def off_deg(u: float, v: float) -> float:
+        return abs((math.degrees(math.atan2(v, u) - math.atan2(dy_rows, dx)) + 180) % 360 - 180)
+
+    dxm, dym, ratio, centroid = flow_mod.contact_motion(rgb, contact)
+    # the direction is what the rule is for; its length is diluted by the gel the imprint
+    # uncovers (inside the union of the two masks, outside the moved imprint)
+    assert off_deg(dxm, dym) < 10 and math.hypot(dxm, dym) / (5 * math.hypot(dx, dy_rows)) > 0.4
+    assert 0.8 < ratio < 1.25 and abs(centroid - 5 * math.hypot(dx, dy_rows)) < 0.5
+    # contact lost after frame 3 (a few pixels of mask left, as a build's contact mask keeps):
+    # the motion is measured from frame 0 to frame 3
+    rgb, contact = _imprint_over_fixed_pattern(dx, dy_rows, lost_at=4)
+    contact[4:, 0, :3] = True
+    assert flow_mod.contact_frames(contact) == [0, 1, 2, 3]
+    dxm, dym, _, _ = flow_mod.contact_motion(rgb, contact)
+    assert off_deg(dxm, dym) < 10 and math.hypot(dxm, dym) < 3.5 * math.hypot(dx, dy_rows)
+    # a mask over the whole frame is a change of light, not a contact
+    whole = contact.copy()
+    whole[0] = True
+    assert flow_mod.contact_frames(whole) == [1, 2, 3]
+    # no mask, or one frame in contact: no contact motion (the phase rule decides)
+    assert flow_mod.contact_motion(rgb, None) is None
+    assert flow_mod.contact_motion(rgb, contact * (np.arange(6) < 1)[:, None, None]) is None

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "results.py"
+sys.path.insert(0, str(SCRIPT.parent))
 
 
 def _module():
@@ -29,9 +30,16 @@ def test_profiles_and_findings() -> None:
     mod = _module()
     demo = mod.profile_runs("demo", octopi=False)
     full = mod.profile_runs("results", octopi=True)
-    assert {r.method for r in demo} == {"flow-shift", "timesformer-small-rgb", "resnet18-rgb",
+    assert {r.method for r in demo} == {"flow-contact", "timesformer-small-rgb", "resnet18-rgb",
                                         "resnet18-depth"}
-    assert {r.method for r in full} == {"flow-shift", "timesformer-base-rgb",
+    v2 = mod.profile_runs("v2", octopi=False)
+    assert {(r.method, r.split) for r in v2 if r.recipe == "timesformer"} == {
+        ("timesformer-small-rgb", "unseen_objects"), ("timesformer-small-rgb", "seen"),
+        ("timesformer-small-depth", "unseen_objects")}
+    assert all(r.config.get("steps") == mod.V2_STEPS["timesformer"] for r in v2
+               if r.recipe == "timesformer")
+    assert "v2 profile" in mod.steps_note("v2", False, None)
+    assert {r.method for r in full} == {"flow-contact", "timesformer-base-rgb",
                                         "timesformer-base-depth", "resnet50-rgb",
                                         "resnet50-depth", "resnet18-rgb"}
     assert [r.dataset for r in full].count("octopi") == 1
@@ -55,6 +63,32 @@ def test_profiles_and_findings() -> None:
     assert "75 % of the direction errors on the adjacent bin" in text and "5.0x" in text
     paper = [{"kind": "slip", "device": "cpu", "latency_ms": 2000.0}]
     assert "500x faster" in " ".join(mod.findings(rows, paper))
+    # intervals: apart or overlapping; RGB against depth-only
+    rows[0]["direction_ci"], refs[0]["direction_ci"] = [93.0, 99.0], [85.0, 94.0]
+    rows[1]["direction_ci"] = [70.0, 88.0]
+    depth = _row(mod, "timesformer-small-depth", "timesformer", "unseen_objects", state=90.0,
+                 direction=70.0, n_dir=37, latency_ms=20.0)
+    depth["run"].config["modality"] = "depth"
+    text = " ".join(mod.findings([*rows, depth], [], refs))
+    assert "[95 % interval 93.0-99.0]" in text and "the intervals overlap" in text
+    assert "TimeSformer on RGB 80.0 % direction, above the same model on depth alone (70.0 %)" \
+        in text
+
+
+def test_effect_table_and_wilson() -> None:
+    import slip_effects as E
+
+    lo, hi = E.wilson(8, 10)
+    assert 0.49 < lo < 0.5 and 0.94 < hi < 0.95 and E.wilson(0, 0) is None
+    truth = {"a": {"direction": 1, "profile": "steady", "contact": "kept", "turn": 0.2,
+                   "group": "g"},
+             "b": {"direction": 2, "profile": "jerk", "contact": "lost", "turn": 1.5,
+                   "group": "g"}}
+    rows = E.effect_table(truth, [("m %", {"a": True, "b": False}), ("ref %", {"a": False})])
+    assert "| speed profile | jerk | 1 | 0.0 [0-79] | - |" in rows
+    assert "| rotation over the window, deg | [0, 0.5) | 1 | 100.0 [21-100] | 0.0 [0-79] |" \
+        in rows
+    assert "| object group | g | 2 | 50.0 [9-91] | 0.0 [0-79] |" in rows
 
 
 def test_page_has_tables_references_and_paper_rows() -> None:
@@ -79,6 +113,7 @@ def test_page_has_tables_references_and_paper_rows() -> None:
                             "by_magnitude": bins}]}
     page = mod.render(rows, paper, info, ["vtsbench train flow"], 60.0)
     assert "| flow-shift | seen | cpu | 7 tree nodes | 5.0 |" in page
+    assert "| 40.0 | - |" in page  # the direction's 95 % interval column
     assert "| phase correlation, first and last frame (reference) | seen | cpu |" in page
     assert "| 99.68 | 96.95 |" in page and "| 95.5 | 91.5 |" in page
     assert "| [0, 0.1) | 0 | - | - |" in page and "| [0.1, inf) | 20 | 50.0 (12.0) |" in page

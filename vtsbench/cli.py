@@ -246,10 +246,10 @@ def simulate(
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
     generator: Annotated[int, typer.Option(
         min=1, max=2,
-        help="Simulator version: 1 (default) the first simulator (rigid shifts at constant "
-             "speed, clean sensor), the same bytes as before for a seed; 2 partial slip, "
-             "rotation, uneven speed, contact made or lost, the gel's fixed pattern and a real "
-             "camera, calibrated to real video (docs/simulator.md).")] = 1,
+        help="Simulator version: 2 (default, benchmark v2's) partial slip, rotation, uneven "
+             "speed, contact made or lost, the gel's fixed pattern and a real camera, "
+             "calibrated to real video (docs/simulator.md); 1 the first simulator (rigid shifts "
+             "at constant speed, clean sensor), the same bytes as before for a seed.")] = 2,
     gel: Annotated[Literal["markers", "plain"] | None, _choice(
         help="Generator 2: the sensor's gel, 'markers' (a printed marker grid) or 'plain' "
              "(default); every session of the folder wears it.")] = None,
@@ -265,6 +265,39 @@ def simulate(
              mm_per_px=mm_per_px, workers=workers, overwrite=overwrite, progress=not quiet,
              generator=generator, gel=gel)
     typer.echo(f"wrote {len(m.entries)} entries in {len(m.sessions)} sessions to {out}")
+
+
+@app.command()
+def benchmark(
+    name: Annotated[Literal["v2", "v2-demo"], typer.Argument(
+        help="Benchmark: v2 (the published one: 3,600 sequences, 3,000 static frames) or "
+             "v2-demo (the same generator at 360 sequences, 300 static frames).")],
+    out: Annotated[Path, typer.Argument(
+        help="Folder to make: OUT/recordings (with its calibration) and OUT/dataset.")],
+    seed: Annotated[int | None, typer.Option(
+        min=0, max=lim.MAX_SEED,
+        help="Another seed than the benchmark's own (a check on data nobody tuned on).")] = None,
+    workers: Annotated[int, typer.Option(min=1, max=lim.MAX_WORKERS,
+                                         help="Worker processes.")] = 2,
+    overwrite: Annotated[bool, typer.Option(
+        "--overwrite", help="Make everything again, replacing OUT's recordings and dataset.")
+    ] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", help="No progress bars.")] = False,
+) -> None:
+    """Make a named, versioned benchmark: simulate, calibrate and build it in one go.
+
+    Resumable: rerun the same command after an interruption; finished steps and shards are
+    kept. Example: [bold]vtsbench benchmark v2 data/v2 --workers 2[/]
+    """
+    from .sim.benchmark import make_benchmark
+
+    made = _run(make_benchmark, name, out, seed=seed, workers=workers, overwrite=overwrite,
+                progress=not quiet, log=lambda m: typer.echo(m, err=m.startswith("warning")))
+    _print_build(made["build"])
+    s = made["seconds"]
+    typer.echo(f"benchmark {name} (seed {made['config']['seed']}, dataset version "
+               f"{made['config']['dataset_version']}) in {out}: simulate {s['simulate']:.0f} s, "
+               f"calibrate {s['calibrate']:.0f} s, build {s['build']:.0f} s")
 
 
 @app.command()

@@ -28,7 +28,14 @@ import numpy as np
 
 from ..errors import VtsError
 from .mapping import METHODS, Mapping, fit_mapping, mapping_from_arrays
-from .markers import MarkerSpec, detect_markers, fill_gradients, marker_mask
+from .markers import (
+    MarkerSpec,
+    detect_markers,
+    dot_correction,
+    fill_gradients,
+    marker_mask,
+    transmission,
+)
 from .sphere import Rim, ball_radius_px, circle_doubts, detect_circle, sphere_fields
 
 FORMAT = "vtsbench.calibration"
@@ -92,8 +99,21 @@ class Calibration:
     # -- run time ------------------------------------------------------------------------
 
     def difference(self, images: np.ndarray) -> np.ndarray:
-        """Colour difference to the background (float32 DN), blurred and clipped as calibrated."""
-        return colour_difference(images, self.background, self.blur_px, self.colour_limit_dn)
+        """Colour difference to the background (float32 DN), blurred and clipped as calibrated;
+        on a marker gel divided by the dots' transmission (`dots`)."""
+        gain = None if self.markers is None else self.dots(images)[0]
+        return colour_difference(images, self.background, self.blur_px, self.colour_limit_dn,
+                                 gain)
+
+    def dots(self, images: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(gain, fill) of frames on a marker gel (`markers.dot_correction`): the factor that
+        divides the dots out of the colour difference, and the pixels to fill in the gradients
+        where that cannot be done (a dot's darkest core, a dot that moved)."""
+        assert self.markers is not None
+        trans = self.__dict__.get("_transmission")
+        if trans is None:
+            trans = self.__dict__["_transmission"] = transmission(self.background, self.markers)
+        return dot_correction(images, self.markers, self.background, trans)
 
     def gradients(self, images: np.ndarray) -> np.ndarray:
         """(p, q) = (dz/dx, dz/dy) as (..., H, W, 2) float32 for RGB images (..., H, W, 3).
@@ -102,20 +122,12 @@ class Calibration:
         """
         images = np.asarray(images)
         self._check_shape(images.shape)
-        diff = self.difference(images)
-        g = self.mapping.relative(diff, self.zero_map)
-        if self.markers is not None:
-            g = self.fill_markers(images, g)
-        return g
-
-    def fill_markers(self, images: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """The gradients with the marker dots of the frames and of the background filled from
-        the gel around them (markers.py); unchanged on a markerless gel."""
-        spec = self.markers
-        if spec is None:
-            return g
-        mask = marker_mask(images, spec, self.background)
-        return fill_gradients(g, mask)
+        if self.markers is None:
+            return self.mapping.relative(self.difference(images), self.zero_map)
+        gain, fill = self.dots(images)
+        diff = colour_difference(images, self.background, self.blur_px, self.colour_limit_dn,
+                                 gain)
+        return fill_gradients(self.mapping.relative(diff, self.zero_map), fill)
 
     def gradients_torch(self, images: Any) -> Any:
         """The same on a torch tensor (..., H, W, 3) of RGB values, on the tensor's device."""
@@ -129,14 +141,17 @@ class Calibration:
                                torch.from_numpy(self.zero_map).to(dev))
         bg, zero = cache[str(dev)]
         diff = images.to(torch.float32) - bg
+        fill = None
+        if self.markers is not None:  # the dots are found on the CPU
+            gain, fill = self.dots(images.cpu().numpy())
+            diff = diff * torch.from_numpy(np.array(gain, np.float32)).to(dev)
         if self.blur_px > 0:
             diff = _blur_torch(diff, self.blur_px)
         diff = diff.clamp(-self.colour_limit_dn, self.colour_limit_dn)
         g = self.mapping.predict_torch(diff) - zero
         g = torch.where((diff != 0).any(dim=-1, keepdim=True), g, torch.zeros_like(g))
-        if self.markers is not None:  # the dots are found and filled on the CPU
-            filled = self.fill_markers(images.cpu().numpy(), g.cpu().numpy())
-            g = torch.from_numpy(filled).to(dev)
+        if fill is not None:  # and filled on the CPU
+            g = torch.from_numpy(fill_gradients(g.cpu().numpy(), fill)).to(dev)
         return g
 
     def _check_shape(self, shape: tuple[int, ...]) -> None:
@@ -181,11 +196,14 @@ class Calibration:
 
 
 def colour_difference(images: np.ndarray, background: np.ndarray, blur_px: float,
-                      limit_dn: float = 255.0) -> np.ndarray:
-    """images - background in float32 DN, Gaussian-blurred by blur_px, clipped to +-limit_dn."""
+                      limit_dn: float = 255.0, gain: np.ndarray | None = None) -> np.ndarray:
+    """images - background in float32 DN, times gain (a marker gel's `Calibration.dots`) when
+    given, Gaussian-blurred by blur_px, clipped to +-limit_dn."""
     import cv2
 
     diff = np.asarray(images, np.float32) - background.astype(np.float32)
+    if gain is not None:
+        diff *= gain
     if blur_px > 0:
         frames = diff.reshape(-1, *diff.shape[-3:])
         for k in range(frames.shape[0]):
@@ -631,7 +649,9 @@ def training_samples(presses: list[Press], background: np.ndarray, scale: tuple[
                      markers: MarkerSpec | None = None
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(colour (N, 3), xy (N, 2), target (N, 2), is_cap (N,)) from the presses' labelled pixels;
-    with markers, the marker dots of each press and of the background are left out."""
+    with markers, the marker dots of each press and of the background are left out: divided
+    back (`Calibration.dots`), a dot's pixels carry up to 1 / DOT_MIN_TRANSMISSION times the
+    noise, which would bias the fit towards flat, so it learns from the gel between them."""
     from .mapping import norm_xy
 
     h, w = background.shape[:2]

@@ -3,11 +3,11 @@ ignores a marker grid, and the disc that best explains the whole change.
 
 A marker gel carries small dark dots on a regular grid. Outside a contact they are the same in
 the press and the background, but their darkness scales every colour change that falls on them,
-so the change map shows holes where a dot lies (and specks where a dot moved). `marker_dots`
-finds the dots in the background (dark blobs well below their surroundings, many of one size);
-`change_map` divides the change on a dot by the dot's transmission and fills the darkest pixels
-from their surroundings (normalised convolution), so the map describes the imprint, not the
-grid.
+so the change map shows holes where a dot lies (and specks where a dot moved).
+`markers.marker_dots` finds the dots in the background (the calibration's dot finder: round
+dark blobs well below their surroundings, many of one size); `change_map` divides the change on
+a dot by the dot's transmission and fills the darkest pixels from their surroundings
+(normalised convolution), so the map describes the imprint, not the grid.
 
 `disc_search` scores discs over the plausible radius range by how well the disc covers the
 changed pixels: +1 for a changed pixel inside it, -1 for an unchanged one. The best disc is the
@@ -22,44 +22,18 @@ import math
 
 import numpy as np
 
-#: Marker dots: blobs darker than DOT_DARK times their surroundings, at least DOT_MIN of them of
-#: areas within a factor of DOT_SPREAD of their median (a grid is many dots of one size).
-DOT_DARK, DOT_MIN, DOT_SPREAD = 0.8, 12, 3.0
-
 
 def _grey_and_level(background: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The background's grey level and its median over a window wider than any marker dot."""
     import cv2
 
+    from .markers import window_px
+
     grey = background.astype(np.float32).mean(axis=-1) if background.ndim == 3 else \
         background.astype(np.float32)
-    k = max(5, (min(grey.shape) // 6) | 1)  # wider than any dot a grid of DOT_MIN dots can hold
-    local = cv2.medianBlur(np.clip(grey, 0, 255).astype(np.uint8), min(k, 255))
+    k = window_px(None, grey.shape)
+    local = cv2.medianBlur(np.clip(grey, 0, 255).astype(np.uint8), k)
     return grey, np.maximum(local.astype(np.float32), 1.0)
-
-
-def marker_dots(background: np.ndarray) -> tuple[np.ndarray, float] | None:
-    """(mask, diameter px) of the marker dots of a background frame, or None without a grid."""
-    import cv2
-
-    grey, local = _grey_and_level(background)
-    dark = (grey < DOT_DARK * local).astype(np.uint8)
-    n, lab, stats, _ = cv2.connectedComponentsWithStats(dark, connectivity=8)
-    if n - 1 < DOT_MIN:
-        return None
-    area = stats[1:, cv2.CC_STAT_AREA].astype(np.float64)
-    med = float(np.median(area[area >= 3])) if (area >= 3).any() else 0.0
-    if med < 3:
-        return None
-    same = (area >= med / DOT_SPREAD) & (area <= med * DOT_SPREAD)
-    if same.sum() < DOT_MIN:
-        return None
-    keep = np.zeros(n, bool)
-    keep[1:] = area <= med * DOT_SPREAD  # small specks too; not a large dark region
-    grow = 2  # the dot's soft edge
-    mask = cv2.dilate(keep[lab].astype(np.uint8), cv2.getStructuringElement(
-        cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))).astype(bool)
-    return mask, 2 * math.sqrt(med / math.pi)
 
 
 #: On a dot, the change is divided by the dot's darkness (the dot scales the light that reaches
@@ -116,7 +90,7 @@ def drift(d: np.ndarray) -> np.ndarray:
 def change_map(image: np.ndarray, background: np.ndarray, sigma: float,
                dots: tuple[np.ndarray, float] | None = None) -> np.ndarray:
     """Blurred sum over channels of |image - background - drift| (float32, H x W; `drift`: the
-    smooth light change between the two taken off). With `dots` (`marker_dots` of the
+    smooth light change between the two taken off). With `dots` (`markers.marker_dots` of the
     background) the change on a dot is divided by the dot's transmission (its grey level over
     the level around it), and filled from around it where the dot is darker than
     DOT_MIN_GAIN."""

@@ -5,17 +5,26 @@ surface shape: left in, the colour-to-gradient fit learns them as slopes, and th
 the flat gel around a press carry their pattern. So:
 
 1. `detect_markers(background, mm_per_px)` looks for a grid in the no-contact frame: dark blobs
-   against the local median of the grey level (a window of about 2.5 mm, from the scale),
-   round and of one consistent size. It returns a `MarkerSpec` (the dots' diameter and the
-   detection settings), or None when the gel shows no such dots.
+   against the local median of the grey level (a window of about 2.5 mm, from the scale; a
+   sixth of the shorter side without one), round and of one consistent size. It returns a
+   `MarkerSpec` (the dots' diameter and the detection settings), or None when the gel shows no
+   such dots. It is the one dot finder: `marker_dots` gives the same dots of a background as a
+   mask, which circle detection divides out of the colour change (`imprint.change_map`).
 2. `marker_mask(images, spec, background_mask)` finds the dots in each frame (they move with
    the gel under a press) with the same test, keeps the blobs of the calibrated size, joins the
    dots of the background (the colour difference is disturbed there too) and grows the result
    by the dots' soft edge and the feature blur.
-3. Calibration leaves the masked pixels out of the training samples; at run time
-   `fill_gradients` replaces the gradients over the mask by their harmonic fill from the
-   unmasked pixels around each dot (Laplace's equation over the hole, a sparse solve), before
-   the Poisson solve.
+3. Calibration leaves the masked pixels out of the training samples (divided back, they would
+   carry more noise than the gel between them).
+4. At run time a dot is a multiplier on the light, in the frame as in the background: where
+   it has not moved, `dot_correction` divides the colour difference by the dot's transmission
+   per channel (`transmission`: the background over its harmonic fill across the dots), so
+   the difference is the one the gel would show without it. Only what cannot be recovered so
+   is masked: a dot's core darker than DOT_MIN_TRANSMISSION, and whole every dot that moved
+   under the press (a Lucas-Kanade step of the frame's transmission against the background's
+   finds it shifted) or shows up away from the background's. `fill_gradients` replaces the
+   gradients over that mask by their harmonic fill from the pixels around it (Laplace's
+   equation over the hole, a sparse solve), before the Poisson solve.
 
 OpenCV does the image work (medianBlur, connectedComponentsWithStats, dilate); scipy.sparse
 the fill.
@@ -64,12 +73,16 @@ class MarkerSpec:
                    int(d["grow_px"]), int(d.get("n_dots", 0)))
 
 
-def window_px(mm_per_px: float | tuple[float, float], shape: tuple[int, int]) -> int:
-    """The local-median window (odd, 5 px up to half the shorter side) for a scale."""
-    mm = float(np.mean(mm_per_px)) if np.ndim(mm_per_px) else float(mm_per_px)
-    k = round(WINDOW_MM / mm)
-    k = max(5, min(k, min(shape) // 2))
+def window_px(mm_per_px: float | tuple[float, float] | None, shape: tuple[int, int]) -> int:
+    """The local-median window (odd, 5 px up to half the shorter side) for a scale; without
+    one, a sixth of the shorter side (wider than any dot of a grid of MIN_DOTS)."""
+    k = min(shape) // 6 if mm_per_px is None else round(WINDOW_MM / _mm(mm_per_px))
+    k = max(5, min(k, min(shape) // 2, 255))
     return k | 1
+
+
+def _mm(mm_per_px: float | tuple[float, float]) -> float:
+    return float(np.mean(mm_per_px)) if np.ndim(mm_per_px) else float(mm_per_px)
 
 
 def _grey(image: np.ndarray) -> np.ndarray:
@@ -103,21 +116,21 @@ def _round(stats: np.ndarray) -> np.ndarray:
     return (aspect <= 2.0) & (fill >= 0.45)
 
 
-def detect_markers(background: np.ndarray, mm_per_px: float | tuple[float, float],
+def detect_markers(background: np.ndarray, mm_per_px: float | tuple[float, float] | None,
                    contrast: float = CONTRAST, grow_px: int = 2) -> MarkerSpec | None:
     """The gel's marker dots as seen in its no-contact frame (H, W, 3), or None: at least
     MIN_DOTS round dark blobs of one size (within AREA_RANGE of their median), 2 px to 3 mm
-    across. grow_px: how far the mask reaches beyond a thresholded dot (the feature blur's
-    reach: 2 px for a 1 px blur)."""
+    across (without a scale: to the local-median window, `window_px`). grow_px: how far the
+    mask reaches beyond a thresholded dot (the feature blur's reach: 2 px for a 1 px blur)."""
     shape = background.shape[:2]
     win = window_px(mm_per_px, shape)
     _, stats = _dark_blobs(background, win, contrast)
     if stats.shape[0] <= 1:
         return None
     st = stats[1:]
-    mm = float(np.mean(mm_per_px)) if np.ndim(mm_per_px) else float(mm_per_px)
     diam = np.sqrt(4 * st[:, 4] / math.pi)
-    ok = _round(st) & (diam >= 2.0) & (diam <= 3.0 / mm)
+    largest = win if mm_per_px is None else 3.0 / _mm(mm_per_px)
+    ok = _round(st) & (diam >= 2.0) & (diam <= largest)
     if ok.sum() < MIN_DOTS:
         return None
     med = float(np.median(st[ok, 4]))
@@ -164,6 +177,94 @@ def marker_mask(images: np.ndarray, spec: MarkerSpec,
     return out.reshape(*lead, h, w)
 
 
+def marker_dots(background: np.ndarray, mm_per_px: float | tuple[float, float] | None = None,
+                grow_px: int = 2) -> tuple[np.ndarray, float] | None:
+    """(mask H x W bool, diameter px) of the marker dots of a no-contact frame, grown by
+    grow_px (their soft edge), or None without a grid: `detect_markers` and `marker_mask` of
+    the background."""
+    spec = detect_markers(background, mm_per_px, grow_px=grow_px)
+    if spec is None:
+        return None
+    return marker_mask(background, spec), spec.diameter_px
+
+
+#: Below this transmission a dot's colour change is too faint to divide back (its noise and
+#: quantisation would be amplified more than 1 / DOT_MIN_TRANSMISSION times): filled instead.
+DOT_MIN_TRANSMISSION = 0.2
+
+
+def transmission(background: np.ndarray, spec: MarkerSpec) -> np.ndarray:
+    """(H, W, 3) float32 share of the light each background pixel passes per channel: the
+    background over its dot-free level (the harmonic fill of the background over its grown
+    dots), clipped to (0, 1]; exactly 1 off the dots."""
+    bg = np.asarray(background, np.float32)
+    dots = marker_mask(background, spec)
+    out = np.ones(bg.shape, np.float32)
+    if dots.any():
+        level = np.maximum(_harmonic(bg, dots), 1.0)
+        out[dots] = np.clip(bg[dots] / level, 1e-3, 1.0)
+    return out
+
+
+#: A dot of the background has moved in a frame when the frame's own transmission there (the
+#: frame over its harmonic fill across the dots) is the background's shifted by more than
+#: MOVED_PX (one Lucas-Kanade step per dot), or departs from it by more than MOVED_SHARE of
+#: the dot's darkness on average over the dot (a dot squeezed, lost or far away).
+MOVED_PX, MOVED_SHARE = 0.5, 0.25
+
+
+def dot_correction(images: np.ndarray, spec: MarkerSpec, background: np.ndarray,
+                   trans: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(gain (..., H, W, 3) float32, fill (..., H, W) bool) of RGB frames (..., H, W, 3): the
+    colour difference times gain is the difference the gel would show without its dots, and
+    fill marks the pixels where it cannot be recovered so (to fill in the gradients).
+
+    A dot multiplies the light of the frame and of the background alike, so where it has not
+    moved the difference is divided by its transmission `trans` (`transmission`). Filled: a
+    dot's core darker than DOT_MIN_TRANSMISSION; whole, every dot of the background that moved
+    (MOVED_PX, MOVED_SHARE) and every dot of the frame away from the background's; all grown
+    by spec.grow_px (the feature blur's reach)."""
+    import cv2
+
+    arr = np.asarray(images)
+    lead, (h, w) = arr.shape[:-3], arr.shape[-3:-1]
+    frames = arr.reshape(-1, h, w, arr.shape[-1])
+    dots = marker_mask(background, spec)  # the grown dots: their rim is dot-free gel
+    n, labels = cv2.connectedComponents(dots.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+    t_bg = trans.mean(axis=-1)
+    dark = t_bg < DOT_MIN_TRANSMISSION
+    lab = labels[dots]
+    depth = np.bincount(lab, 1.0 - t_bg[dots], n)
+    ty, tx = (a[dots] for a in np.gradient(t_bg))
+    sxx, sxy, syy = (np.bincount(lab, a * b, n) for a, b in ((tx, tx), (tx, ty), (ty, ty)))
+    det = np.maximum(sxx * syy - sxy * sxy, 1e-12)
+    g = spec.grow_px
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * g + 1, 2 * g + 1))
+    fill = np.empty((frames.shape[0], h, w), bool)
+    for k, f in enumerate(frames):
+        grey = f.astype(np.float32).mean(axis=-1)
+        t_f = np.ones((h, w), np.float32)
+        if dots.any():
+            level = np.maximum(_harmonic(grey[..., None], dots)[:, 0], 1.0)
+            t_f[dots] = grey[dots] / level
+        dt = (t_f - t_bg)[dots]
+        bx, by = np.bincount(lab, dt * tx, n), np.bincount(lab, dt * ty, n)
+        shift = np.hypot(syy * bx - sxy * by, sxx * by - sxy * bx) / det
+        moved = (shift > MOVED_PX) | \
+            (np.bincount(lab, np.abs(dt), n) > MOVED_SHARE * np.maximum(depth, 1e-6))
+        moved[0] = False
+        # the frame's dots that touch none of the background's
+        fl, fst = cv2.connectedComponentsWithStats(_frame_mask(f, spec).view(np.uint8),
+                                                   connectivity=8, ltype=cv2.CV_32S)[1:3]
+        touch = np.zeros(fst.shape[0], bool)
+        touch[fl[dots]] = True
+        touch[0] = True
+        hole = moved[labels] | ~touch[fl] | dark
+        fill[k] = cv2.dilate(hole.view(np.uint8), kernel).view(bool)
+    gain = np.broadcast_to(1.0 / np.maximum(trans, DOT_MIN_TRANSMISSION), arr.shape)
+    return gain, fill.reshape(*lead, h, w)
+
+
 def fill_gradients(g: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """(..., H, W, 2) gradients with the masked pixels replaced by the harmonic fill of the
     unmasked ones around them: Laplace's equation (5-point) over each hole, the hole's rim as
@@ -180,7 +281,7 @@ def fill_gradients(g: np.ndarray, mask: np.ndarray) -> np.ndarray:
 
 
 def _harmonic(g: np.ndarray, m: np.ndarray) -> np.ndarray:
-    """(n, 2) harmonic values at the n masked pixels of one frame (float32)."""
+    """(n, C) harmonic values at the n masked pixels of one frame (H, W, C) (float32)."""
     import scipy.sparse
     import scipy.sparse.linalg
 
@@ -190,7 +291,7 @@ def _harmonic(g: np.ndarray, m: np.ndarray) -> np.ndarray:
     index = np.full((h, w), -1, np.int64)
     index[ys, xs] = np.arange(n)
     diag = np.full(n, 1e-9)  # a hole without unmasked neighbours is held at 0
-    rhs = np.zeros((n, 2))
+    rhs = np.zeros((n, g.shape[-1]))
     rows, cols = [], []
     ids = np.arange(n)
     for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):

@@ -141,7 +141,7 @@ def change_map(image: np.ndarray, background: np.ndarray, sigma: float,
     """Blurred sum over channels of |image - background| (float32, H x W); markers: fill the
     background's marker dots first (`imprint.change_map`)."""
     from .imprint import change_map as imprint_change
-    from .imprint import marker_dots
+    from .markers import marker_dots
 
     return imprint_change(image, background, sigma, marker_dots(background) if markers else None)
 
@@ -522,6 +522,20 @@ def _largest_change(m: np.ndarray, loose: float) -> tuple[float, float, float] |
     return float(cent[best, 0]), float(cent[best, 1]), math.sqrt(area / math.pi)
 
 
+def _hull_of_largest(mask: np.ndarray) -> np.ndarray:
+    """The mask (bool H x W) with the convex hull of its largest component filled in."""
+    import cv2
+
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    if n <= 1:
+        return mask
+    best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    pts = np.column_stack(np.nonzero(lab == best)[::-1]).astype(np.int32)
+    out = mask.astype(np.uint8)
+    cv2.fillConvexPoly(out, cv2.convexHull(pts), 1)
+    return out.astype(bool)
+
+
 def change_support(image: np.ndarray, background: np.ndarray, sigma: float | None = None
                    ) -> tuple[float, float, float] | None:
     """The imprint as the colour change shows it: (x, y, r) of the largest region whose change
@@ -551,11 +565,18 @@ def circle_doubts(circle: tuple[float, float, float], image: np.ndarray, backgro
     if sup is None:
         return [*out, "no visible colour change"]
     sr = sup[2]
-    if not SUPPORT_LOW * sr <= r <= SUPPORT_HIGH * sr:
-        out.append(f"radius {r:.1f} px, but the colour change covers about {sr:.1f} px")
+    # Light that shows the slope's size only (near-uniform light) leaves the shallow cap's top
+    # unchanged: a ring, of which a weak press shows a crescent above the noise. What the
+    # largest change encloses (its convex hull, as the detector's start takes it) counts as
+    # changed against a too-large circle and for the cover, never against a too-small one.
+    changed = _hull_of_largest(m > loose)
+    sr_hull = max(sr, math.sqrt(float(changed.sum()) / math.pi))
+    if not SUPPORT_LOW * sr <= r <= SUPPORT_HIGH * sr_hull:
+        shown = sr if r < SUPPORT_LOW * sr else sr_hull
+        out.append(f"radius {r:.1f} px, but the colour change covers about {shown:.1f} px")
     yy, xx = np.ogrid[:h, :w]
     disc = (xx - x) ** 2 + (yy - y) ** 2 <= r * r
-    cover = float((m[disc] > loose).mean()) if disc.any() else 0.0
+    cover = float(changed[disc].mean()) if disc.any() else 0.0
     if cover < COVER_MIN:
         out.append(f"only {cover:.0%} of the circle shows a colour change (centre off the "
                    "imprint)")

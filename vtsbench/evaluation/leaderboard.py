@@ -195,19 +195,39 @@ def _table(cols: list[Column], rows: list[dict[str, Any]]) -> list[str]:
                   for r in rows]
 
 
+def _version_key(version: str) -> tuple[int, ...]:
+    """Sort key of a semantic version: its numbers; a pre-release sorts before its release and
+    build metadata (after '+') is ignored."""
+    core, _, _ = version.partition("+")
+    core, dash, _pre = core.partition("-")
+    nums = [int(x) if x.isdigit() else 0 for x in core.split(".")]
+    return (*nums, 0 if dash else 1)
+
+
+def current_version(es: list[dict[str, Any]]) -> str:
+    """The newest dataset version among the entries: the one the leaderboard ranks."""
+    return max((e["dataset"]["dataset_version"] for e in es), key=_version_key)
+
+
 def render_folder(folder: Path) -> str:
-    """The markdown of one dataset/split folder."""
-    es = [e for _, e in entries(folder)]
-    if not es:
+    """The markdown of one dataset/split folder: the entries of the newest dataset version
+    ranked, those scored on an earlier version listed apart as not comparable."""
+    every = [e for _, e in entries(folder)]
+    if not every:
         return ""
+    version = current_version(every)
+    es = [e for e in every if e["dataset"]["dataset_version"] == version]
+    old = [e for e in every if e["dataset"]["dataset_version"] != version]
     kind = "slip" if any(t in es[0]["metrics"] for t in ("state", "direction")) else "static"
     main = "state" if kind == "slip" else "object"
     es.sort(key=lambda e: -(_mean(e, main, "accuracy") or -1.0))
     split = es[0]["split"]
     lines = [f"# {md_cell(es[0]['dataset']['name'])} / {md_cell(split)} "
              f"({md_cell(es[0]['part'])})", "",
-             f"{len(es)} entries, best {main} accuracy first; mean ± standard deviation over "
-             "seeds where there are several.", ""]
+             f"Dataset version {md_cell(version)}: {len(es)} entries, best {main} accuracy "
+             "first; mean ± standard deviation over seeds where there are several."
+             + (f" {len(old)} entries scored on an earlier version are listed at the end." if old
+                else ""), ""]
     cols = _summary_columns(kind)
     lines += _table(cols, es)
     if split in PAPER:
@@ -235,6 +255,15 @@ def render_folder(folder: Path) -> str:
             det.insert(6, ("adjacent share of errors %",
                            lambda e: pct(_mean(e, "direction", "adjacent_error_share"))))
         lines += ["", f"## {task}", "", *_table(det, rows)]
+    if old:
+        old.sort(key=lambda e: (_version_key(e["dataset"]["dataset_version"]),
+                                -(_mean(e, main, "accuracy") or -1.0)), reverse=False)
+        cols_old: list[Column] = [("dataset version", lambda e: e["dataset"]["dataset_version"]),
+                                  *cols]
+        lines += ["", "## Scored on an earlier dataset version", "",
+                  f"Not comparable with the entries above: the dataset changed (version "
+                  f"{md_cell(version)} is current). Kept for the record; submit again on the "
+                  "current version to be ranked.", "", *_table(cols_old, old)]
     return "\n".join(lines) + "\n"
 
 

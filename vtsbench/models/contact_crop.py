@@ -117,16 +117,28 @@ def _grey(sample: dict[str, Any], modality: str, box: tuple[int, int, int]) -> n
 MOTION_PX = 480
 
 
+def contact_mask(sample: dict[str, Any], box: tuple[int, int, int], size: int) -> np.ndarray:
+    """(size, size) float32: 1 where the gel is in contact in any frame of the sample inside
+    box (its `contact` masks), 0 elsewhere; all ones when the sample has no contact masks."""
+    c = sample.get("contact")
+    if c is None:
+        return np.ones((size, size), np.float32)
+    union = np.asarray(c, dtype=bool).any(axis=0)[None].astype(np.float32)
+    return (crop_sequence(union, box, size)[0] > 0.0).astype(np.float32)
+
+
 def contact_crop(sample: dict[str, Any], crop_px: int, size: int, modality: str,
-                 flow: str | None = None, soft_px: float = FLOW_SOFT_PX
-                 ) -> tuple[np.ndarray, tuple[float, float]]:
+                 flow: str | None = None, soft_px: float = FLOW_SOFT_PX,
+                 flow_mask: bool = False) -> tuple[np.ndarray, tuple[float, float]]:
     """A sample's sequence cut around its contact: (T, C, size, size) float32 (rgb in [0, 1],
     then depth in mm for rgbd; depth alone for depth; with `flow`, two more channels of motion
     from the first frame: `shift`, the phase-correlation displacement of the moving gel drawn
     over where it moves (`vtsbench.models.motion.shift_field`), or `dis`, the dense DIS optical
     flow of the crop (`crop_flow`), both in pixels at the model's input, radially compressed)
     and the model-input pixels per sensor pixel (x, y). `soft_px`: the length (pixels at the
-    model's input) where the compression of the `shift` channels bends (`compress_flow`)."""
+    model's input) where the compression of the `shift` channels bends (`compress_flow`).
+    `flow_mask`: the `dis` channels kept only where the gel is in contact (`contact_mask`), so
+    that the still gel and its fixed pattern (zero flow) do not dilute the imprint's motion."""
     if flow not in (None, *FLOWS):
         raise ValueError(f"flow must be one of {FLOWS} or None, not {flow!r}")
     rgb = sample["rgb"]
@@ -141,7 +153,10 @@ def contact_crop(sample: dict[str, Any], crop_px: int, size: int, modality: str,
         parts.append(d[:, None])
     scale = size / box[2]
     if flow == "dis":
-        parts.append(crop_flow(_grey(sample, modality, box), size))
+        fl = crop_flow(_grey(sample, modality, box), size)
+        if flow_mask:
+            fl *= contact_mask(sample, box, size)[None, None]
+        parts.append(fl)
     elif flow == "shift":
         from vtsbench.models.motion import shift_field
 

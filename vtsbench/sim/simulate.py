@@ -274,7 +274,8 @@ def simulate(out: str | Path, *, seed: int = 0, n_static: int = 30, n_sequences:
     if gel is not None and generator < 2:
         raise VtsError("--gel needs --generator 2 (generator 1 has a clean gel)")
     app = sensor_appearance(gel or DEFAULT_GEL) if generator >= 2 else None
-    plans = make_plans(seed, n_static, n_sequences, n_presses, n_objects, n_sessions)
+    plans = make_plans(seed, n_static, n_sequences, n_presses, n_objects, n_sessions,
+                       per_state=generator >= 2)
     with staged_dir(out, overwrite, marker="recordings.json") as stage:
         sessions, captures = [], []
         fields = sensor(size[0], size[1], mm_per_px)

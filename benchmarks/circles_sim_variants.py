@@ -1,0 +1,167 @@
+"""Calibration on simulated sensors of other light layouts, with and without a marker gel.
+
+For each light layout of the simulator's optics (`sim.optics.LIGHTS`: three coloured zones, red,
+green, blue and white from four sides, near-uniform diffuse light), each gel (the marker gel of
+generator 2, and the same gel with no markers printed) and each orientation (landscape 240x320,
+portrait 320x240), the same calibration presses of the simulator's 3 mm ball are drawn
+(`sim.plan.press_scene`, 0.05 mm/px, the exact truth rendered by `sim.scene.render`) and shot
+through the layout and the gel's pattern and camera (`sim.relight.relight`: JPEG, dust, grain,
+imprint gain). Per variant, one row: presses used and dropped by `calibrate --circles detect`,
+the detected circles against the exact ones (the ball's centre; the radius of a disc of the
+contact's area), and the held-out plane-aligned depth RMSE (against the exact depth, over the
+contact) of poly calibrations trained on the detected and on the exact circles: the last
+quarter of the presses held out, every variant the same presses. The marker rows also give
+their RMSE over that of the same presses without markers (must stay within 1.2x).
+
+    nice -n 15 .venv/bin/python benchmarks/circles_sim_variants.py [--presses 16]
+        [--lights zones3,sides4,uniform] [--method poly] [--seed 0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from machine import machine  # benchmarks/machine.py: the shared machine line
+
+from vtsbench.sim.optics import LIGHTS
+
+SHAPES = {"landscape": (240, 320), "portrait": (320, 240)}
+MM_PER_PX = 0.05
+GELS = ("none", "markers")
+
+
+def render_presses(lights: str, gel: str, shape: tuple[int, int], n: int, seed: int
+                   ) -> tuple[np.ndarray, list[tuple[str, np.ndarray, tuple, object]]]:
+    """The background and n presses (id, frame, exact circle, truth) of one layout, gel and
+    frame shape; the same scenes and noise draws for every layout and gel."""
+    from vtsbench.sim.appearance import background, sensor_appearance
+    from vtsbench.sim.optics import Capture, sensor
+    from vtsbench.sim.plan import press_scene
+    from vtsbench.sim.relight import relight
+    from vtsbench.sim.scene import render
+
+    app = sensor_appearance("markers")
+    if gel == "none":
+        app = dataclasses.replace(app, marker_share=0.0)
+    fields = sensor(*shape, MM_PER_PX, lights=lights)
+    cap = Capture(gel=seed)
+    bg = background(app, fields, cap, np.random.default_rng([seed, 1]))
+    out = []
+    for i in range(n):
+        rng = np.random.default_rng([seed, 2, i])
+        scene = press_scene(rng, shape, MM_PER_PX, 2, app)
+        truth = render(scene.with_effects(dataclasses.replace(scene.effects, noise=False)))
+        frame = relight(truth.grad, fields, cap, rng, app)[0]
+        (cx, cy), r = scene.centers_px[0], math.sqrt(truth.contact[0].sum() / math.pi)
+        out.append((f"press-{i:03d}", frame, (cx, cy, r), truth))
+    return bg, out
+
+
+def write_folder(out: Path, bg: np.ndarray, presses: list, sensor: str) -> Path:
+    """A recordings folder of presses with their exact circles and truth files."""
+    from vtsbench.recordings.manifest import Circle, Entry, Manifest, Session, Source, save_manifest
+    from vtsbench.recordings.media import write_png
+    from vtsbench.recordings.truth import Truth, write_truth
+    from vtsbench.sim.objects import BALL_RADIUS_MM
+
+    (out / "presses").mkdir(parents=True)
+    (out / "truth").mkdir()
+    write_png(out / "background.png", bg)
+    entries = []
+    for pid, frame, c, t in presses:
+        write_png(out / "presses" / f"{pid}.png", frame)
+        write_truth(out / "truth" / f"{pid}.npz", Truth(t.depth_mm, t.grad, t.contact,
+                                                        t.motion_px))
+        entries.append(Entry(pid, "press", "s0", Source(f"presses/{pid}.png"),
+                             object="calibration_ball", ball_radius_mm=BALL_RADIUS_MM,
+                             circle=Circle(*c), truth=f"truth/{pid}.npz"))
+    h, w = bg.shape[:2]
+    save_manifest(out, Manifest(sessions=[Session("s0", sensor, (h, w), (MM_PER_PX, MM_PER_PX),
+                                                  background="background.png")],
+                                entries=entries, name=out.name,
+                                created_by="benchmarks/circles_sim_variants.py"))
+    return out
+
+
+def circle_errors(record: list[dict]) -> dict:
+    """Used and dropped presses, and the detected circles against the exact ones."""
+    dist, rad = [], []
+    for p in record:
+        lab, det = p["label"], p["detected"]
+        if p["status"] != "dropped" and det is not None:
+            dist.append(math.hypot(det["x"] - lab["x"], det["y"] - lab["y"]))
+            rad.append(det["r"] / lab["r"] - 1)
+    d, r = np.array(dist), np.abs(np.array(rad))
+    return {"used": len(d), "dropped": len(record) - len(d),
+            "centre_med": float(np.median(d)), "centre_max": float(d.max()),
+            "radius_med": float(np.median(r)), "radius_max": float(r.max()),
+            "good": float(((d <= 3) & (r <= 0.1)).sum() / len(record))}
+
+
+def measure(tmp: Path, name: str, bg: np.ndarray, presses: list, held_n: int,
+            method: str) -> dict:
+    """The row of one variant (see the module doc)."""
+    from vtsbench.depth.calibration import Press, calibrate, evaluate_press, load_presses
+    from vtsbench.sim.objects import BALL_RADIUS_MM
+
+    every = write_folder(tmp / f"{name}-all", bg, presses, name)
+    out = circle_errors(load_presses(every, circles="detect")[2]["presses"])
+    train = write_folder(tmp / f"{name}-train", bg, presses[:-held_n], name)
+    held = [Press(pid, frame, *c, BALL_RADIUS_MM, "label", every / "truth" / f"{pid}.npz")
+            for pid, frame, c, _ in presses[-held_n:]]
+    for circles in ("detect", "label"):
+        run = calibrate(train, method=method, holdout=0, circles=circles, device=None)
+        out[circles] = float(np.mean([evaluate_press(run.calibration, p).errors[
+            "plane_aligned_rmse_mm"] for p in held]))
+        spec = run.calibration.markers
+        out["markers"] = "-" if spec is None else f"{spec.n_dots} of {spec.diameter_px:.0f} px"
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--presses", type=int, default=16)
+    ap.add_argument("--lights", default=",".join(LIGHTS))
+    ap.add_argument("--method", default="poly")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args()
+    held_n = max(1, args.presses // 4)
+    print(f"{args.presses} simulated presses of a 3 mm ball a variant at {MM_PER_PX} mm/px, "
+          f"{held_n} held out, {args.method}, seed {args.seed}\n")
+    print("| lights | gel | frame | used | dropped | centre error px, median / max | radius "
+          "error, median / max | within 3 px and 10 % | markers found | held-out RMSE mm, "
+          "exact circles | detected | ratio | x without markers (exact / detected) | time |")
+    print("|---|---|---|---:|---:|---|---|---:|---|---:|---:|---:|---|---:|")
+    t_all = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        for lights in args.lights.split(","):
+            for frame, shape in SHAPES.items():
+                plain: dict | None = None
+                for gel in GELS:
+                    t0 = time.perf_counter()
+                    bg, presses = render_presses(lights, gel, shape, args.presses, args.seed)
+                    r = measure(Path(tmp), f"{lights}-{frame}-{gel}", bg, presses, held_n,
+                                args.method)
+                    vs = "-" if plain is None else (f"{r['label'] / plain['label']:.2f} / "
+                                                    f"{r['detect'] / plain['detect']:.2f}")
+                    plain = r if gel == "none" else plain
+                    print(f"| {lights} | {gel} | {frame} | {r['used']} | {r['dropped']} | "
+                          f"{r['centre_med']:.2f} / {r['centre_max']:.2f} | "
+                          f"{r['radius_med']:.1%} / {r['radius_max']:.1%} | {r['good']:.0%} | "
+                          f"{r['markers']} | {r['label']:.4f} | {r['detect']:.4f} | "
+                          f"{r['detect'] / r['label']:.2f}x | {vs} | "
+                          f"{time.perf_counter() - t0:.0f} s |", flush=True)
+    print(f"\nTotal {time.perf_counter() - t_all:.0f} s. Machine: {machine()}")
+
+
+if __name__ == "__main__":
+    main()
