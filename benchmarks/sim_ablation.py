@@ -80,13 +80,13 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
     return max(0.0, c - h), min(1.0, c + h)
 
 
-def score_one(task: tuple) -> tuple[int, bool, bool, bool] | None:
-    """(row, phase right, phase shift under 0.5 px, flow right) of one sequence; None when
-    not a slip."""
+def score_one(task: tuple) -> tuple[int, bool, bool, bool, bool] | None:
+    """(row, phase right, phase shift under 0.5 px, flow phase rule right, flow contact rule
+    right (on the rendered contact masks)) of one sequence; None when not a slip."""
     import cv2
 
     from vtsbench.labels import angle_to_class, label_contact_window
-    from vtsbench.recipes_builtin.flow import global_shift
+    from vtsbench.recipes_builtin.flow import contact_motion, global_shift
     from vtsbench.sim.objects import OBJECTS
     from vtsbench.sim.optics import Capture
     from vtsbench.sim.plan import EntryPlan, entry_rng, sequence_plan_scene
@@ -121,7 +121,10 @@ def score_one(task: tuple) -> tuple[int, bool, bool, bool] | None:
     dx, dy, _ = global_shift(r.frames)
     flow_ok = bool(dx or dy) and \
         angle_to_class(math.degrees(math.atan2(-dy, dx)) % 360) == lab.direction
-    return row, pc_ok, miss, flow_ok
+    cm = contact_motion(r.frames, r.contact)
+    contact_ok = cm is not None and bool(cm[0] or cm[1]) and \
+        angle_to_class(math.degrees(math.atan2(-cm[1], cm[0])) % 360) == lab.direction
+    return row, pc_ok, miss, flow_ok, contact_ok
 
 
 def _init() -> None:
@@ -163,19 +166,22 @@ def main() -> None:
           f"(seed {args.seed}), {h}x{w} at {args.mm_per_px:g} mm/px, {args.frames} frames, "
           f"{args.gel} gel; 95 % Wilson intervals\n")
     print("| row | slips | phase-correlation reference | shift under 0.5 px "
-          "| flow recipe (direction) |")
-    print("|---|---:|---:|---:|---:|")
+          "| flow recipe's phase rule (direction) | flow recipe's contact rule (direction) |")
+    print("|---|---:|---:|---:|---:|---:|")
     for i in chosen:
         got = [r for r in results if r is not None and r[0] == i]
         n = len(got)
         pc = sum(r[1] for r in got)
         miss = sum(r[2] for r in got)
         fl = sum(r[3] for r in got)
+        co = sum(r[4] for r in got)
         lo, hi = wilson(pc, n)
         flo, fhi = wilson(fl, n)
+        clo, chi = wilson(co, n)
         print(f"| {rows[i][0]} | {n} | {100 * pc / max(n, 1):.1f} % [{100 * lo:.0f}-"
               f"{100 * hi:.0f}] | {100 * miss / max(n, 1):.0f} % | {100 * fl / max(n, 1):.1f} % "
-              f"[{100 * flo:.0f}-{100 * fhi:.0f}] |")
+              f"[{100 * flo:.0f}-{100 * fhi:.0f}] | {100 * co / max(n, 1):.1f} % "
+              f"[{100 * clo:.0f}-{100 * chi:.0f}] |")
     print(f"\n{len(tasks)} sequences rendered and scored in {secs:.0f} s with {args.workers} "
           f"workers.\nMachine: {machine()}")
 

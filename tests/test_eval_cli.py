@@ -95,15 +95,23 @@ def test_eval_malformed_exits_2(vts_dataset: Path, tmp_path: Path) -> None:
     assert res.exit_code == 2 and "no split 'x'" in res.output
 
 
+def add_entries(ds: Path, tmp_path: Path, root: Path, split: str, part: str,
+                methods: tuple[str, str]) -> Path:
+    """`leaderboard add` a right submission under methods[0] and one with a wrong answer under
+    methods[1]; the last submission's path."""
+    for wrong, method in enumerate(methods):
+        sub = write_submission(ds, tmp_path / method, split, part, wrong, method)
+        res = runner.invoke(app, ["leaderboard", "add", str(sub), "--dataset", str(ds),
+                                  "--split", split, "--part", part, "--root", str(root)])
+        assert res.exit_code == 0, res.output
+    return sub
+
+
 def test_leaderboard_add_render_rescore(vts_dataset: Path, tmp_path: Path,
                                         monkeypatch: pytest.MonkeyPatch) -> None:
     split, part = slip_split(vts_dataset)
     root = tmp_path / "lb"
-    for method, wrong in (("good", 0), ("worse", 1)):
-        sub = write_submission(vts_dataset, tmp_path / method, split, part, wrong, method)
-        res = runner.invoke(app, ["leaderboard", "add", str(sub), "--dataset", str(vts_dataset),
-                                  "--split", split, "--part", part, "--root", str(root)])
-        assert res.exit_code == 0, res.output
+    sub = add_entries(vts_dataset, tmp_path, root, split, part, ("good", "worse"))
     res = runner.invoke(app, ["leaderboard", "add", str(sub), "--dataset", str(vts_dataset),
                               "--split", split, "--part", part, "--root", str(root)])
     assert res.exit_code == 2 and "already on the leaderboard" in res.output
@@ -146,11 +154,7 @@ def test_leaderboard_ranks_the_newest_dataset_version(vts_dataset: Path, tmp_pat
 
     split, part = slip_split(vts_dataset)
     root = tmp_path / "lb"
-    for method, wrong in (("old-good", 0), ("new-worse", 1)):
-        sub = write_submission(vts_dataset, tmp_path / method, split, part, wrong, method)
-        res = runner.invoke(app, ["leaderboard", "add", str(sub), "--dataset", str(vts_dataset),
-                                  "--split", split, "--part", part, "--root", str(root)])
-        assert res.exit_code == 0, res.output
+    add_entries(vts_dataset, tmp_path, root, split, part, ("old-good", "new-worse"))
     folder = root / load_info(vts_dataset).name / split
     for p in folder.glob("new-worse-*.json"):
         doc = json.loads(p.read_text())

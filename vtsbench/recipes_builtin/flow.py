@@ -40,6 +40,9 @@ DIRECTIONS = ("phase", "mean_flow", "contact")
 MIN_CONTACT_PX = 5
 FULL_FRAME_SHARE = 0.9
 MIN_CONTACT_SHARE = 0.2
+#: Farneback parameters of the `contact` rule: pyramid scale, levels, window, iterations,
+#: poly_n, poly_sigma, flags.
+FARNEBACK = (0.5, 3, 15, 3, 5, 1.1, 0)
 #: Margin (px) of the box around the contact where the `contact` rule's flow is computed.
 CONTACT_MARGIN_PX = 24
 CHECKPOINT = "checkpoint.safetensors"
@@ -169,7 +172,7 @@ def contact_motion(rgb: np.ndarray, contact: np.ndarray | None
     y1 = min(int(ys.max()) + CONTACT_MARGIN_PX + 1, m.shape[0])
     x1 = min(int(xs.max()) + CONTACT_MARGIN_PX + 1, m.shape[1])
     g = _gray(np.ascontiguousarray(rgb[[a, b], y0:y1, x0:x1]), 1.0)
-    flow = cv2.calcOpticalFlowFarneback(g[0], g[1], None, 0.5, 3, 15, 3, 5, 1.1, 0)
+    flow = cv2.calcOpticalFlowFarneback(g[0], g[1], None, *FARNEBACK)
     inside = m[y0:y1, x0:x1]
     dx, dy = float(flow[..., 0][inside].mean()), float(flow[..., 1][inside].mean())
     area0, area1 = float(c[a].sum()), float(c[b].sum())
