@@ -188,3 +188,45 @@ def test_harmonic_fill_is_exact_on_a_linear_field() -> None:
     out = fill_gradients(broken, mask)
     np.testing.assert_allclose(out, g, atol=2e-5)
     np.testing.assert_array_equal(fill_gradients(g, np.zeros_like(mask)), g)
+
+
+def test_build_depth_of_a_marker_gel_is_the_calibrations(folders) -> None:
+    """The dataset build's depth path (DepthMaker) divides and fills the dots as
+    Calibration.gradients does; on a plain gel it still takes none of it."""
+    import dataclasses
+
+    from vtsbench.dataset.depthmaps import DepthMaker
+    from vtsbench.dataset.shard import depth_and_contact
+    from vtsbench.depth.poisson import integrate
+
+    plain_folder, marked, layer = folders
+    m = load_manifest(marked)
+    press = read_image(plain_folder / m.entries[0].source.path).astype(np.float64)
+    moved = layer.copy()
+    w = layer.shape[1]
+    moved[:, : w // 2] = np.roll(layer, 2, axis=1)[:, : w // 2]  # the left half's dots slid
+    slid = np.clip(np.rint(press * moved[..., None]), 0, 255).astype(np.uint8)
+    for folder, has_dots in ((marked, True), (plain_folder, False)):
+        cal = calibrate(folder, method="lut", holdout=2, seed=1, device=None,
+                        options={"bins": 24, "cells": 2}).calibration
+        assert (cal.markers is not None) == has_dots
+        maker = DepthMaker(cal)
+        frames = [read_image(folder / e.source.path) for e in m.entries[:2]]
+        for k, img in enumerate([*frames, slid] if has_dots else frames):
+            g = cal.gradients(img)
+            for solver in ("dct", "dst"):
+                want = integrate(g[..., 0], g[..., 1], method=solver, mm_per_px=cal.mm_per_px,
+                                 dtype=np.float32)
+                got = maker.depth(img, solver)
+                assert (maker.fill is not None) == has_dots
+                if has_dots:
+                    np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)
+                else:  # unchanged: bit for bit
+                    np.testing.assert_array_equal(got, want)
+            if k == 2:  # the slid dots are filled, not divided
+                assert maker.fill[:, : w // 2 - 12].sum() > 200
+            built = depth_and_contact(img[None], cal, "dct")[0][0]
+            np.testing.assert_array_equal(built, maker.depth(img, "dct"))
+            if has_dots:  # the dots left in the difference show in the depth
+                raw = DepthMaker(dataclasses.replace(cal, markers=None)).depth(img, "dct")
+                assert float(np.abs(raw - maker.depth(img, "dct")).max()) > 0.02

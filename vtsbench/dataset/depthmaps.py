@@ -26,6 +26,12 @@ DCTs 1.9). What differs:
 The contact mask is made from the same blurred colour difference (`contact`): its Euclidean
 distance to the background over the channels above CONTACT_PARAMS threshold, cleaned at full
 resolution by `vtsbench.depth.mask.clean_mask` (OpenCV): 0.8 ms a frame.
+
+On a marker gel (the calibration's `markers`) each frame goes through the calibration's own
+dot handling, as `Calibration.gradients`: `difference` multiplies the difference by the gain
+of `Calibration.dots` before the blur, and `gradients` fills that frame's fill mask
+(`markers.fill_gradients`); the contact is then made from the divided difference. A plain gel
+takes none of this.
 """
 
 from __future__ import annotations
@@ -64,6 +70,8 @@ class DepthMaker:
         self.ax, self.ay, self.b = (np.zeros((h, w), np.float32) for _ in range(3))
         self.p, self.q = np.empty((h, w), np.float32), np.empty((h, w), np.float32)
         self.lut: dict[str, Any] | None = None
+        #: fill mask (H, W) of the marker-gel frame last passed to `difference`; None: no dots
+        self.fill: np.ndarray | None = None
         m = cal.mapping
         if isinstance(m, LutMapping):
             cy, cx, b = m.table.shape[0], m.table.shape[1], m.table.shape[2]
@@ -143,20 +151,26 @@ class DepthMaker:
         return np.take(lut["words"], idx).view(np.float32).reshape(*self.shape, 2)
 
     def difference(self, rgb: np.ndarray) -> np.ndarray:
-        """The calibration's colour difference of one frame (H, W, 3), in self.diff."""
+        """The calibration's colour difference of one frame (H, W, 3), in self.diff; on a marker
+        gel divided by the dots' transmission, with the frame's fill mask kept in self.fill for
+        `gradients` (Calibration.dots)."""
         import cv2
 
         cal, d = self.cal, self.diff
         # the same float32 values as np.subtract(rgb, bg, dtype=np.float32) (uint8 -> float32 is
         # exact), without numpy's buffered casting of mixed types: 0.30 -> 0.23 ms
         cv2.subtract(rgb, self.bg, dst=d, dtype=cv2.CV_32F)
+        if cal.markers is not None:  # as colour_difference: times the gain, then blurred
+            gain, self.fill = cal.dots(rgb)
+            np.multiply(d, gain, out=d)
         if cal.blur_px > 0:
             cv2.GaussianBlur(d, (0, 0), cal.blur_px, dst=d, borderType=cv2.BORDER_REFLECT_101)
         np.clip(d, -cal.colour_limit_dn, cal.colour_limit_dn, out=d)
         return d
 
     def gradients(self, diff: np.ndarray) -> np.ndarray:
-        """(p, q) of one frame (H, W, 2) float32, as Calibration.gradients."""
+        """(p, q) of one frame (H, W, 2) float32, as Calibration.gradients (on a marker gel:
+        diff from `difference`, whose frame's fill mask is filled here)."""
         g = self._gradients_of(diff)
         if not self.zero_folded:
             g -= self.cal.zero_map
@@ -164,6 +178,10 @@ class DepthMaker:
             still = (diff[..., 0] == 0) & (diff[..., 1] == 0) & (diff[..., 2] == 0)
             if still.any():
                 g[still] = 0.0
+        if self.fill is not None and self.fill.any():
+            from ..depth.markers import fill_gradients
+
+            g[...] = fill_gradients(g, self.fill)
         return g
 
     def integrate(self, g: np.ndarray, solver: str, mask: np.ndarray | None = None
