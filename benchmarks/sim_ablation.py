@@ -34,6 +34,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from machine import machine  # benchmarks/machine.py: the shared machine line
+from slip_effects import wilson  # benchmarks/slip_effects.py: the 95 % Wilson interval
 
 from vtsbench.sim.appearance import GELS, sensor_appearance
 from vtsbench.sim.mechanics import Mechanics
@@ -67,17 +68,6 @@ def variants(gel: str) -> list[Variant]:
         ("- noise (noise scale 0)", 2, {}, {"noise_scale": 0.0}, True),
         ("- the whole appearance (mechanics only)", 2, {}, None, True),
     ]
-
-
-def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    """95 % Wilson score interval of k successes in n."""
-    if n == 0:
-        return 0.0, 1.0
-    p = k / n
-    d = 1 + z * z / n
-    c = (p + z * z / (2 * n)) / d
-    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
-    return max(0.0, c - h), min(1.0, c + h)
 
 
 def score_one(task: tuple) -> tuple[int, bool, bool, bool, bool] | None:
@@ -175,9 +165,9 @@ def main() -> None:
         miss = sum(r[2] for r in got)
         fl = sum(r[3] for r in got)
         co = sum(r[4] for r in got)
-        lo, hi = wilson(pc, n)
-        flo, fhi = wilson(fl, n)
-        clo, chi = wilson(co, n)
+        lo, hi = wilson(pc, n) or (0.0, 1.0)
+        flo, fhi = wilson(fl, n) or (0.0, 1.0)
+        clo, chi = wilson(co, n) or (0.0, 1.0)
         print(f"| {rows[i][0]} | {n} | {100 * pc / max(n, 1):.1f} % [{100 * lo:.0f}-"
               f"{100 * hi:.0f}] | {100 * miss / max(n, 1):.0f} % | {100 * fl / max(n, 1):.1f} % "
               f"[{100 * flo:.0f}-{100 * fhi:.0f}] | {100 * co / max(n, 1):.1f} % "

@@ -257,7 +257,7 @@ def render_folder(folder: Path) -> str:
         lines += ["", f"## {task}", "", *_table(det, rows)]
     if old:
         old.sort(key=lambda e: (_version_key(e["dataset"]["dataset_version"]),
-                                -(_mean(e, main, "accuracy") or -1.0)), reverse=False)
+                                -(_mean(e, main, "accuracy") or -1.0)))
         cols_old: list[Column] = [("dataset version", lambda e: e["dataset"]["dataset_version"]),
                                   *cols]
         lines += ["", "## Scored on an earlier dataset version", "",

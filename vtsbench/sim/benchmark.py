@@ -74,27 +74,29 @@ def get_config(name: str, seed: int | None = None) -> BenchmarkConfig:
     return cfg if seed is None else dataclasses.replace(cfg, seed=seed)
 
 
-def _done(folder: Path, cfg: BenchmarkConfig, step: str) -> bool:
-    """Whether `step` finished in folder with this very configuration."""
+def _done_steps(folder: Path, cfg: BenchmarkConfig) -> list[str]:
+    """The steps that finished in folder with this very configuration (none for another)."""
     p = folder / CONFIG_FILE
     if not p.is_file():
-        return False
+        return []
     try:
         doc = json.loads(p.read_text())
     except (OSError, ValueError):
-        return False
-    return doc.get("config") == cfg.to_dict() and step in doc.get("done", [])
+        return []
+    return list(doc.get("done", [])) if doc.get("config") == cfg.to_dict() else []
+
+
+def _done(folder: Path, cfg: BenchmarkConfig, step: str) -> bool:
+    """Whether `step` finished in folder with this very configuration."""
+    return step in _done_steps(folder, cfg)
 
 
 def _mark(folder: Path, cfg: BenchmarkConfig, step: str) -> None:
+    """Record that `step` finished in folder with this configuration."""
     from ..atomic import write_text_atomic
 
-    p = folder / CONFIG_FILE
-    done: list[str] = []
-    if _done(folder, cfg, "simulate"):
-        done = json.loads(p.read_text()).get("done", [])
-    doc = {"config": cfg.to_dict(), "done": sorted({*done, step})}
-    write_text_atomic(p, json.dumps(doc, indent=1) + "\n")
+    doc = {"config": cfg.to_dict(), "done": sorted({*_done_steps(folder, cfg), step})}
+    write_text_atomic(folder / CONFIG_FILE, json.dumps(doc, indent=1) + "\n")
 
 
 def make_benchmark(name: str, out: str | Path, *, seed: int | None = None, workers: int = 1,
