@@ -48,10 +48,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from vtsbench.dataset import build as build_mod
-from vtsbench.dataset import execute, shard
-from vtsbench.dataset.build import BuildOptions, build
-from vtsbench.dataset.store import ARRAYS, Layout, open_group, write_metadata, write_shard
+from vtsbench.dataset.build import execute, shard
+from vtsbench.dataset.build import pipeline as build_mod
+from vtsbench.dataset.build.pipeline import BuildOptions, build
+from vtsbench.dataset.build.store import write_metadata, write_shard
+from vtsbench.dataset.format.arrays import Layout
+from vtsbench.dataset.format.layout import ARRAYS
+from vtsbench.dataset.read.store import open_group
 from vtsbench.recordings import manifest as manifest_mod
 
 
@@ -170,7 +173,8 @@ def stage_times(rec: Path, work: Path, n_sequences: int = 24) -> dict[str, float
     shard warms up (imports, caches, FFT plans)."""
     import cv2
 
-    from vtsbench.dataset.store import depth_to_int16, write_shard
+    from vtsbench.dataset.build.store import write_shard
+    from vtsbench.dataset.format.arrays import depth_to_int16
     from vtsbench.depth.calibration import load_calibration
     from vtsbench.recordings.manifest import load_manifest
     from vtsbench.recordings.media import read_frames

@@ -3,8 +3,9 @@ submission: the paper's unseen-object test (5 held-out objects, 400 sequences pe
 
 Run: .venv/bin/python benchmarks/eval.py [--repeats 5]
 
-Fakes a dataset in a temporary folder with only what scoring reads: meta/info.json, the split
-file and index/slip.parquet (1,200 slip sequences; no arrays). The submission predicts the
+Fakes a dataset in a temporary folder with only what scoring reads through `vtsbench.load`:
+meta/info.json, the split file and the two indexes (1,200 slip sequences, no static sample; no
+arrays). The submission predicts the
 state right 95.5 % of the time and the direction 91.5 % (errors mostly on the adjacent bin).
 Reports the best and median wall time of `vtsbench eval` with and without the PNGs, and of
 `vtsbench --help` (the start-up floor); prints the machine line; removes what it wrote.
@@ -35,7 +36,8 @@ OBJECTS = [f"obj{i:02d}" for i in range(15)]
 
 
 def fake_dataset(root: Path) -> Path:
-    """info.json, meta/splits/unseen_objects.json and index/slip.parquet of 1,200 sequences."""
+    """info.json, meta/splits/unseen_objects.json, index/slip.parquet of 1,200 sequences and an
+    empty index/static.parquet; loads with `vtsbench.load`."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -47,6 +49,7 @@ def fake_dataset(root: Path) -> Path:
         index_schema,
     )
     from vtsbench.dataset.splits import write_splits
+    from vtsbench.dataset.validate import kind_counts
 
     rng = np.random.default_rng(0)
     ds = root / "dataset"
@@ -62,12 +65,19 @@ def fake_dataset(root: Path) -> Path:
                 state=[STATES[s] for s in state], state_idx=state.tolist(),
                 direction=[None if d < 0 else int(d) for d in direction], source=["fake"] * n)
     (ds / "index").mkdir(parents=True)
-    pq.write_table(pa.table(rows, schema=index_schema("slip")), ds / "index" / "slip.parquet")
+    tables = {"slip": pa.table(rows, schema=index_schema("slip")),
+              "static": pa.table({c: [] for c in index_schema("static").names},
+                                 schema=index_schema("static"))}
+    for kind, table in tables.items():
+        pq.write_table(table, ds / "index" / f"{kind}.parquet")
     sp = SplitFile("unseen_objects", "slip", "fake", 0, {"train": [], "test": ids},
                    ["object:test"], {})
     shas = write_splits(ds / "meta" / "splits", [sp])
     info = DatasetInfo(name="fake", vtsbench_version="0.1.0", frames_per_sequence=8,
-                       resolution=(480, 640), objects=OBJECTS, counts=Counts(),
+                       resolution=(480, 640), objects=OBJECTS,
+                       counts=Counts(kind_counts(tables["static"], "static"),
+                                     kind_counts(tables["slip"], "slip"),
+                                     {"unseen_objects": {"train": 0, "test": n}}),
                        shapes={"static": {"rgb": (0, 480, 640, 3), "depth": (0, 480, 640),
                                           "contact": (0, 480, 640)},
                                "slip": {"rgb": (n, 8, 480, 640, 3), "depth": (n, 8, 480, 640),
@@ -75,9 +85,9 @@ def fake_dataset(root: Path) -> Path:
                        zarr=ZarrSettings({"static": 1, "slip": 1}), splits=shas,
                        dataset_sha256="0" * 64)
     (ds / "meta" / "info.json").write_text(info.to_json())
-    from vtsbench.dataset.schema import load_info
+    import vtsbench
 
-    load_info(ds)  # the fake must pass the reader's checks
+    vtsbench.load(ds).split_file("unseen_objects")  # the fake must pass the reader's checks
     sub = root / "sub.csv"
     st_pred = np.where(rng.random(n) < 0.955, state, (state + 1) % 3)
     miss = rng.random(n) >= 0.915

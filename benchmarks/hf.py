@@ -38,7 +38,7 @@ import vtsbench
 def make_dataset(work: Path, sequences: int, static: int, size: tuple[int, int],
                  workers: int) -> tuple[Path, float]:
     """Simulated recordings -> calibration (lut) -> dataset; returns it and the build seconds."""
-    from vtsbench.dataset.build import BuildOptions, build
+    from vtsbench.dataset.build.pipeline import BuildOptions, build
     from vtsbench.depth.calibration import calibrate, save_calibration
     from vtsbench.sim.simulate import simulate
 
@@ -115,7 +115,8 @@ def main() -> None:
 def run(work: Path, a: argparse.Namespace, size: tuple[int, int]) -> None:
     import datasets
 
-    from vtsbench.dataset.hub import HUB_DIR, export_hf
+    from vtsbench.dataset.format.layout import HUB_DIR
+    from vtsbench.dataset.tools.hub import export_hf
 
     datasets.disable_progress_bars()
     root, build_s = make_dataset(work, a.sequences, a.static, size, a.workers)

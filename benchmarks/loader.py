@@ -31,15 +31,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from machine import machine  # benchmarks/machine.py: the shared machine line
 
 import vtsbench
-from vtsbench.dataset.loader import View
-from vtsbench.dataset.store import DEPTH_SCALE_MM, depth_to_int16
+from vtsbench.dataset.format.arrays import depth_to_int16
+from vtsbench.dataset.format.layout import DEPTH_SCALE_MM
+from vtsbench.dataset.read.view import View
 
 Reader = Callable[[int], tuple[np.ndarray, np.ndarray]]
 
 
 def build_dataset(work: Path, sequences: int, size: tuple[int, int]) -> Path:
     """Simulated recordings -> calibration (poly) -> dataset, with the library functions."""
-    from vtsbench.dataset.build import BuildOptions, build
+    from vtsbench.dataset.build.pipeline import BuildOptions, build
     from vtsbench.depth.calibration import calibrate, save_calibration
     from vtsbench.sim.simulate import simulate
 

@@ -76,7 +76,7 @@ def score_one(task: tuple) -> tuple[int, bool, bool, bool, bool] | None:
     import cv2
 
     from vtsbench.labels import angle_to_class, label_contact_window
-    from vtsbench.recipes_builtin.flow import contact_motion, global_shift
+    from vtsbench.recipes.builtin.flow import contact_motion, global_shift
     from vtsbench.sim.objects import OBJECTS
     from vtsbench.sim.optics import Capture
     from vtsbench.sim.plan import EntryPlan, entry_rng, sequence_plan_scene

@@ -20,11 +20,11 @@ HELPER = "atomic.py"
 
 #: (module path, function) -> why that write does not go through the helper.
 ALLOWED = {
-    ("dataset/staging.py", "locked_stage"):
+    ("dataset/build/staging.py", "locked_stage"):
         "opens the lock file in append mode to hold a lock on it; writes nothing",
-    ("dataset/location.py", "checked"):
+    ("dataset/read/location.py", "checked"):
         "copies a remote file into a private temporary folder to parse it; not an output",
-    ("dataset/hub.py", "write_kind"):
+    ("dataset/tools/hub_write.py", "write_kind"):
         "streams row groups into a hidden temporary file (too large for memory) and renames "
         "it when complete: atomic, by the same temporary-name rule",
 }

@@ -141,7 +141,7 @@ def test_every_user_given_number_and_string_has_a_bound() -> None:
 
     import typer
 
-    from vtsbench.cli_doc import _literal, commands
+    from vtsbench.cli.doc import _literal, commands
 
     unbounded = []
     for path, cmd in commands(typer.main.get_command(app)):

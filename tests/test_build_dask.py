@@ -27,7 +27,7 @@ def test_local_cluster_equals_process_pool(sim_recordings: Path, built: Path,
 def test_unreachable_scheduler_is_one_line(sim_recordings: Path, tmp_path: Path,
                                            monkeypatch: pytest.MonkeyPatch) -> None:
     pytest.importorskip("distributed")
-    from vtsbench.dataset import execute as build_mod
+    from vtsbench.dataset.build import execute as build_mod
     from vtsbench.errors import VtsError
 
     monkeypatch.setattr(build_mod, "CONNECT_TIMEOUT", "1s")

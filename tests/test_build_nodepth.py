@@ -144,8 +144,8 @@ def test_no_depth_resumes_a_partial_rgbd_build(sim_recordings: Path, tmp_path: P
                                                monkeypatch: pytest.MonkeyPatch) -> None:
     from test_build_helpers import SHARD_MB
 
-    from vtsbench.dataset import execute as build_mod
     from vtsbench.dataset.build import BuildOptions, build, partial_path
+    from vtsbench.dataset.build import execute as build_mod
 
     out = tmp_path / "ds"
     real, calls = build_mod.run_shard, []

@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 from test_build_helpers import BUILD_ARGS, SHARD_MB, cli, copy_recordings, tree_bytes
 
-from vtsbench.dataset import execute as build_mod
 from vtsbench.dataset.build import WORK, BuildOptions, build, partial_path
+from vtsbench.dataset.build import execute as build_mod
 
 pytest_plugins = ["test_build_helpers"]
 

@@ -26,11 +26,11 @@ from vtsbench.depth.calibration import (
     load_calibration,
     metadata_errors,
     save_calibration,
-    taxim_recordings,
 )
 from vtsbench.depth.reconstruct import reconstruct
 from vtsbench.errors import VtsError
 from vtsbench.recordings.media import read_image, write_png
+from vtsbench.recordings.taxim import taxim_recordings
 
 TAXIM = "taxim_gelsight_ball/dataPack_small.npz"
 

@@ -136,7 +136,7 @@ def test_old_spellings_work_with_a_note(args: list[str], old: str, new: str, tmp
 def test_stdout_console_is_wide_in_a_pipe_and_follows_columns(monkeypatch) -> None:
     """Tables printed to a pipe or log get 160 columns (rich would assume 80 and cut names);
     COLUMNS, when set, decides."""
-    from vtsbench.cli import _console
+    from vtsbench.cli.run import console as _console
 
     monkeypatch.delenv("COLUMNS", raising=False)
     assert _console().width == 160  # pytest's stdout is not a terminal

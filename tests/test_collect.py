@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from vtsbench.collect import CollectOptions, collect, window_labels
 from vtsbench.errors import VtsError
 from vtsbench.labels import Thresholds
-from vtsbench.motionlog import read_motion_log
 from vtsbench.recordings import media
+from vtsbench.recordings.collect import CollectOptions, collect, window_labels
 from vtsbench.recordings.manifest import MANIFEST_NAME, Mount, load_manifest
+from vtsbench.recordings.motionlog import read_motion_log
 
 H, W = 96, 128
 FPS = 10.0

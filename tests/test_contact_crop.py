@@ -10,8 +10,8 @@ import pytest
 import torch
 
 from vtsbench.labels import angle_to_class
-from vtsbench.models.contact_crop import contact_crop, crop_box, crop_center
-from vtsbench.models.symmetry import dihedral_augment, dihedral_average
+from vtsbench.transforms.contact_crop import contact_crop, crop_box, crop_center
+from vtsbench.transforms.symmetry import dihedral_augment, dihedral_average
 
 
 def moving_blob(dx: float, dy_rows: float, t: int = 4, h: int = 60, w: int = 80,
@@ -111,7 +111,7 @@ def test_dihedral_average_maps_every_view_back(dx: float, dy_rows: float) -> Non
 def test_crop_flow_follows_the_motion() -> None:
     import cv2
 
-    from vtsbench.models.contact_crop import FLOW_SOFT_PX, crop_flow
+    from vtsbench.transforms.contact_crop import FLOW_SOFT_PX, crop_flow
 
     seq = moving_blob(6, -3, h=64, w=64, at=(30, 34))
     grey = np.stack([cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for f in seq])
@@ -144,7 +144,7 @@ def test_pretrained_filters_of_extra_channels_start_at_zero() -> None:
 def test_dihedral_turns_flow_vectors_with_the_frames() -> None:
     import cv2
 
-    from vtsbench.models.contact_crop import crop_flow
+    from vtsbench.transforms.contact_crop import crop_flow
 
     def flow_dir(frames: torch.Tensor) -> int:
         grey = (frames.mean(1).numpy() * 255).astype(np.uint8)
@@ -187,7 +187,7 @@ def moving_bar(dx: float, dy_rows: float, t: int = 5, h: int = 96, w: int = 128)
 def test_shift_field_holds_the_displacement_where_the_gel_moves(dx: float, dy: float) -> None:
     import cv2
 
-    from vtsbench.models.motion import shift_field
+    from vtsbench.transforms.motion import shift_field
 
     seq = moving_bar(dx, dy)
     grey = np.stack([cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for f in seq])
@@ -203,7 +203,7 @@ def test_shift_field_holds_the_displacement_where_the_gel_moves(dx: float, dy: f
 
 
 def test_shift_field_is_zero_without_motion_and_for_one_frame() -> None:
-    from vtsbench.models.motion import shift_field
+    from vtsbench.transforms.motion import shift_field
 
     still = np.full((4, 32, 32), 90, np.uint8)
     assert not shift_field(still).any()
@@ -213,7 +213,7 @@ def test_shift_field_is_zero_without_motion_and_for_one_frame() -> None:
 def test_shift_channels_follow_the_motion_of_an_elongated_imprint() -> None:
     # sliding along its own length: the dense flow sees little of it (aperture), the shift
     # channels the whole displacement, in pixels at the model's input, compressed
-    from vtsbench.models.contact_crop import FLOW_SOFT_PX
+    from vtsbench.transforms.contact_crop import FLOW_SOFT_PX
 
     seq = moving_bar(10.0, 0.0, h=160, w=200)
     x, (sx, _) = contact_crop({"rgb": seq}, 96, 48, "rgb", flow="shift")
@@ -229,7 +229,7 @@ def test_shift_channels_follow_the_motion_of_an_elongated_imprint() -> None:
 def test_flow_mask_keeps_the_flow_only_where_the_gel_is_in_contact() -> None:
     """`flow_mask`: the dis channels are zero outside the union of the contact masks and the same
     as without the mask inside it; no contact masks keep everything."""
-    from vtsbench.models.contact_crop import contact_mask
+    from vtsbench.transforms.contact_crop import contact_mask
 
     seq = moving_blob(4, 0)
     contact = np.zeros(seq.shape[:3], bool)

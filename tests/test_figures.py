@@ -110,7 +110,7 @@ def test_the_figure_helper_never_goes_below_print_quality(tmp_path: Path) -> Non
 
 def test_preview_at_print_quality(make_recordings: Any, tmp_path: Path,
                                   saved: list[Any]) -> None:
-    from vtsbench.preview import write_preview
+    from vtsbench.recordings.preview import write_preview
 
     root, _ = make_recordings()
     out = tmp_path / "sheet.png"

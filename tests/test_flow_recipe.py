@@ -15,7 +15,7 @@ from vtsbench.recipes import load_recipe
 
 pytest_plugins = ["loader_conftest"]
 
-FLOW = Path(__file__).resolve().parents[1] / "vtsbench" / "recipes_builtin" / "flow.py"
+FLOW = Path(__file__).resolve().parents[1] / "vtsbench" / "recipes" / "builtin" / "flow.py"
 
 
 def _shifted(dx: int, dy_rows: int, frames: int = 5) -> np.ndarray:

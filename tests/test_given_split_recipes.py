@@ -8,7 +8,7 @@ from loader_conftest import predict_and_eval
 
 pytest_plugins = ["loader_conftest"]
 
-FLOW = Path(__file__).resolve().parents[1] / "vtsbench" / "recipes_builtin" / "flow.py"
+FLOW = Path(__file__).resolve().parents[1] / "vtsbench" / "recipes" / "builtin" / "flow.py"
 
 
 def test_given_objects_through_train_predict_eval(vts_dataset: Path, tmp_path: Path) -> None:

@@ -105,8 +105,8 @@ def test_submission_with_a_repeated_column_is_refused(ds: Path, tmp_path: Path,
 
 
 def test_motion_log_and_circles_with_a_repeated_column(tmp_path: Path) -> None:
-    from vtsbench.motionlog import read_motion_log
     from vtsbench.recordings.importer import read_circles
+    from vtsbench.recordings.motionlog import read_motion_log
 
     log = tmp_path / "log.csv"
     log.write_text("t_s,x_mm,y_mm,z_mm,x_mm\n0,0,0,0,1\n1,0,0,0,1\n")
@@ -159,7 +159,7 @@ def test_a_build_whose_output_lock_is_held_is_refused(rec: Path, tmp_path: Path)
 def test_existence_is_checked_again_under_the_lock(rec: Path, tmp_path: Path,
                                                    monkeypatch: pytest.MonkeyPatch) -> None:
     """A dataset finished by another build between the first check and the lock is kept."""
-    from vtsbench.dataset import build as b
+    from vtsbench.dataset.build import pipeline as b
 
     out = tmp_path / "out"
     real = b.locked_stage

@@ -116,9 +116,9 @@ def test_package_has_no_import_circles() -> None:
 def test_known_edges_are_seen() -> None:
     """The parse sees relative, function-level and parent-package imports."""
     graph = import_graph(ROOT)
-    assert "vtsbench.dataset.arrays" in graph["vtsbench.dataset.hf"]  # inside a function
-    assert "vtsbench.dataset.store" in graph["vtsbench.dataset.loader"]  # `from . import store`
-    assert "vtsbench.dataset.build" not in graph["vtsbench.dataset.card"]  # TYPE_CHECKING only
+    assert "vtsbench.dataset.read.arrays" in graph["vtsbench.dataset.read.hf"]  # in a function
+    assert "vtsbench.dataset.read.store" in graph["vtsbench.dataset.read.loader"]  # `from . import`
+    assert "vtsbench.dataset.build.plan" not in graph["vtsbench.dataset.build.card"]  # types only
 
 
 def test_a_circle_is_reported(tmp_path: Path) -> None:

@@ -23,11 +23,11 @@ from typing import Any
 import pytest
 
 from vtsbench import atomic
-from vtsbench.dataset import build as build_mod
-from vtsbench.dataset import finish as finish_mod
-from vtsbench.dataset import hub, staging
-from vtsbench.dataset.build import BuildOptions, build
+from vtsbench.dataset.build import BuildOptions, build, staging
+from vtsbench.dataset.build import finish as finish_mod
+from vtsbench.dataset.build import pipeline as build_mod
 from vtsbench.dataset.schema import load_info
+from vtsbench.dataset.tools import hub
 from vtsbench.dataset.verify import verify
 from vtsbench.errors import VtsError
 

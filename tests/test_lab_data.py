@@ -278,7 +278,7 @@ def _against_labels(run, ball_px: float) -> dict[str, tuple[float, float, float,
 
 @pytest.mark.real
 def test_real_taxim_detected_circles_are_checked(tmp_path) -> None:
-    from vtsbench.depth.calibration import taxim_recordings
+    from vtsbench.recordings.taxim import taxim_recordings
 
     npz = real_dir("taxim_gelsight_ball") / "dataPack_small.npz"
     rec = taxim_recordings(npz, tmp_path / "taxim")
@@ -306,9 +306,10 @@ def test_real_taxim_detected_centres_agree_with_the_consistent_centres(tmp_path)
     from the labels. Every detected centre of the 49 lies within 3 px of it (the labels: 14
     beyond), and where a label and its detection part by more than 3 px, the detection is the
     nearer (docs/depth.md)."""
-    from vtsbench.depth.calibration import load_presses, taxim_recordings
+    from vtsbench.depth.calibration import load_presses
     from vtsbench.depth.centres import consistent_centres
     from vtsbench.depth.sphere import Rim
+    from vtsbench.recordings.taxim import taxim_recordings
 
     rec = taxim_recordings(real_dir("taxim_gelsight_ball") / "dataPack_small.npz",
                            tmp_path / "taxim")

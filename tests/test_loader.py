@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 import vtsbench
-from vtsbench.dataset import loader
 from vtsbench.dataset.loader import SampleIndexError, View
+from vtsbench.dataset.read import loader
 from vtsbench.dataset.schema import schema_errors
 from vtsbench.errors import VtsError
 

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from vtsbench.errors import VtsError
-from vtsbench.models.resnet import augment, grad_cam, static_resnet, write_gradcam_overlays
+from vtsbench.models.resnet import grad_cam, static_resnet, write_gradcam_overlays
 from vtsbench.models.timesformer import (
     DualHeadTimesformer,
     PretrainedWeightsMissing,
@@ -16,6 +16,7 @@ from vtsbench.models.timesformer import (
     masked_joint_loss,
     parameter_counts,
 )
+from vtsbench.transforms.augment import augment
 
 T, S = 2, 32  # tiny sequences: 2 frames of 32x32 with patch 16
 
@@ -205,7 +206,7 @@ def test_augment_leaves_depth_values_unjittered():
 
 def test_flip_augment_mirrors_frames_and_maps_directions() -> None:
     from vtsbench.labels import MIRROR_X, MIRROR_Y
-    from vtsbench.models.timesformer import flip_augment
+    from vtsbench.transforms.symmetry import flip_augment
 
     x = torch.arange(16 * 2 * 1 * 3 * 4, dtype=torch.float32).view(16, 2, 1, 3, 4)
     d = torch.tensor([0, 1, 2, 3, 4, 5, 6, 7, -1, -1, 0, 1, 2, 3, 4, 5])

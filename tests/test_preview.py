@@ -4,8 +4,8 @@ import numpy as np
 from typer.testing import CliRunner
 
 from vtsbench.cli import app
-from vtsbench.preview import pick_entries
 from vtsbench.recordings.manifest import load_manifest
+from vtsbench.recordings.preview import pick_entries
 from vtsbench.recordings.truth import Truth, write_truth
 
 

@@ -181,7 +181,7 @@ def test_the_remote_copy_itself_refuses_a_path_leaving_it(served: Path, tmp_path
     dataset joins no listed path outside its temporary folder."""
     import dataclasses
 
-    from vtsbench.dataset import remote
+    from vtsbench.dataset.read import remote
     from vtsbench.dataset.schema import load_info
 
     scratch = tmp_path / "scratch"

@@ -11,7 +11,7 @@ from vtsbench.recipes import load_recipe
 
 pytest_plugins = ["loader_conftest"]
 
-RECIPE = Path(__file__).resolve().parents[1] / "vtsbench" / "recipes_builtin" / "resnet.py"
+RECIPE = Path(__file__).resolve().parents[1] / "vtsbench" / "recipes" / "builtin" / "resnet.py"
 SPLIT = "static_sessions"
 TINY = {"image_size": 32, "steps": 2, "batch_size": 2, "warmup_steps": 0,
         "checkpoint_every": 1, "gradcam": 2}
@@ -58,7 +58,7 @@ def test_resnet_depth_predicts_every_sample(vts_dataset: Path, tmp_path: Path) -
 def test_dihedral_views_are_the_eight_exact_symmetries() -> None:
     import torch
 
-    from vtsbench.recipes_builtin.resnet import dihedral_views
+    from vtsbench.recipes.builtin.resnet import dihedral_views
 
     x = torch.arange(2 * 5 * 5, dtype=torch.float32).view(1, 2, 5, 5)  # no symmetry of its own
     v = dihedral_views(x)
@@ -72,7 +72,7 @@ def test_dihedral_views_are_the_eight_exact_symmetries() -> None:
 def test_depth_detail_lifts_fine_relief_and_leaves_a_smooth_dome() -> None:
     import torch
 
-    from vtsbench.recipes_builtin.resnet import _normalize
+    from vtsbench.recipes.builtin.resnet import _normalize
 
     yy, xx = torch.meshgrid(torch.arange(64.0), torch.arange(64.0), indexing="ij")
     dome = (0.5 * torch.exp(-((xx - 32) ** 2 + (yy - 32) ** 2) / (2 * 12.0**2))).view(1, 1, 64, 64)

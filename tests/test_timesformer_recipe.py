@@ -13,7 +13,7 @@ from vtsbench.recipes import load_recipe
 
 pytest_plugins = ["loader_conftest"]
 
-RECIPE = Path(__file__).resolve().parents[1] / "vtsbench" / "recipes_builtin" / "timesformer.py"
+RECIPE = Path(__file__).resolve().parents[1] / "vtsbench" / "recipes" / "builtin" / "timesformer.py"
 TINY = {"config": "small", "modality": "rgbd", "image_size": 32, "num_frames": 2, "steps": 3,
         "batch_size": 2, "warmup_steps": 0, "checkpoint_every": 2}
 
@@ -58,7 +58,7 @@ def test_timesformer_rows_for_every_sample(vts_dataset: Path, tmp_path: Path) ->
 def test_delta_input_and_input_modes() -> None:
     import torch
 
-    from vtsbench.recipes_builtin.timesformer import _normalize, input_mode
+    from vtsbench.recipes.builtin.timesformer import _normalize, input_mode
 
     x = torch.rand(2, 4, 3, 8, 8)
     small = {"config": "small", "modality": "rgb", "depth_scale_mm": 1.0, "input": None,

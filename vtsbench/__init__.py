@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from .dataset.loader import load
+    from .dataset.read.loader import load
 
 __all__ = ["load"]
 
@@ -17,7 +17,7 @@ __all__ = ["load"]
 def __getattr__(name: str) -> Any:
     """Lazy attributes: `load` imports the dataset loader on first access."""
     if name == "load":
-        from .dataset.loader import load
+        from .dataset.read.loader import load
 
         return load
     raise AttributeError(f"module 'vtsbench' has no attribute {name!r}")

@@ -3,10 +3,12 @@ progress bar, CUDA with mixed precision when present, DDP under `torchrun`.
 
 Determinism: the samples of step s are drawn from a permutation of the dataset seeded by
 (seed, epoch), so a resumed run reads the same batches as an uninterrupted one without any
-data-loader state. A checkpoint holds the model, the optimizer state, the step, the AMP scaler
-and the RNG states (torch CPU and CUDA, numpy, Python), so resuming on CPU from step k gives
-bit-identical weights to never stopping. Checkpoints are safetensors: tensors plus JSON in the
-string metadata; nothing is pickled.
+data-loader state. A step's samples are read together, through the dataset's `__getitems__`
+where it has one (a view's `to_torch()`, the crop datasets: one batched read of the arrays),
+which gives the same items as reading them one by one. A checkpoint holds the model, the
+optimizer state, the step, the AMP scaler and the RNG states (torch CPU and CUDA, numpy,
+Python), so resuming on CPU from step k gives bit-identical weights to never stopping.
+Checkpoints are safetensors: tensors plus JSON in the string metadata; nothing is pickled.
 
 Under `torchrun --nproc_per_node N` (RANK / WORLD_SIZE set) the loop joins a process group (NCCL
 on CUDA, gloo on CPU), wraps the model in DistributedDataParallel and gives each rank its
@@ -28,6 +30,7 @@ import numpy as np
 import torch
 
 from .environment import deterministic
+from .recipes.data import read_items
 
 CHECKPOINT_DIR = "checkpoints"
 FINAL = "checkpoint.safetensors"
@@ -203,7 +206,7 @@ def load_checkpoint(path: str | Path, model: torch.nn.Module | None = None,
     """Load what save_checkpoint wrote into model / optimizer / scaler; returns the metadata.
     A checkpoint that is damaged or does not fit the model is a one-line VtsError."""
     from .errors import VtsError
-    from .recipes import check_checkpoint
+    from .recipes.checkpoints import check_checkpoint
 
     check_checkpoint(path)
     try:
@@ -274,7 +277,8 @@ def train_loop(model: torch.nn.Module, loss_fn: LossFn, dataset: Any, out_dir: s
                optimizer: torch.optim.Optimizer | None = None,
                stop_after: int | None = None) -> TrainResult:
     """Train `model` for cfg.steps optimizer steps over `dataset` (anything with len and
-    [i]); `loss_fn(model, batch, device)` returns the scalar loss of a collated batch.
+    [i]; a step's items come from one `__getitems__` call where it has one, as DataLoader
+    reads them); `loss_fn(model, batch, device)` returns the scalar loss of a collated batch.
 
     Writes OUT/checkpoints/step-NNNNNNNN.safetensors every cfg.checkpoint_every steps (keeping
     the last cfg.keep_checkpoints) and OUT/checkpoint.safetensors at the end. With `resume`, the
@@ -327,7 +331,7 @@ def train_loop(model: torch.nn.Module, loss_fn: LossFn, dataset: Any, out_dir: s
             for g, base in zip(optimizer.param_groups, base_lrs, strict=True):
                 g["lr"] = base * lr_factor(step, cfg)
             idx = batch_indices(len(dataset), step, cfg.batch_size, seed, rank, world)
-            batch = collate([dataset[i] for i in idx])
+            batch = collate(read_items(dataset, idx))
             optimizer.zero_grad(set_to_none=True)
             with torch.autocast(device_type=dev.type, dtype=amp_dtype, enabled=use_amp):
                 loss = loss_fn(net, batch, dev)

@@ -8,9 +8,10 @@ from __future__ import annotations
 import datetime as dt
 import json
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -18,8 +19,13 @@ from ..atomic import write_text_atomic
 from ..errors import VtsError
 from . import metrics as M
 from .magnitude import slip_motion
-from .report import evaluate, pct, score
-from .submission import Submission, load_truth
+from .report import cell, evaluate_submission, score
+from .result import DatasetRef, TaskResult, tasks_from_dict, tasks_to_dict
+from .submission import Submission, load_truth, open_dataset
+from .tasks import BOARDS, TASKS, Column, headline_column, kind_of, task_columns
+
+if TYPE_CHECKING:
+    from ..dataset.loader import VtsDataset
 
 ENTRY_VERSION = 1
 #: The paper's figures (accuracy %), by split, shown as a reference row.
@@ -53,7 +59,7 @@ def entry_schema_errors(doc: Any) -> list[str]:
             for e in v.iter_errors(doc)]
 
 
-def add(submission: str | Path, dataset: str | Path, split: str, part: str = "test",
+def add(submission: str | Path, dataset: str | Path | VtsDataset, split: str, part: str = "test",
         root: str | Path = "leaderboards", meta: str | Path | None = None,
         replace: bool = False) -> Path:
     """Score a submission and store it as a leaderboard entry; returns the entry's path."""
@@ -61,7 +67,7 @@ def add(submission: str | Path, dataset: str | Path, split: str, part: str = "te
         if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,99}", name) or ".." in name:
             raise VtsError(f"{what} name {name!r} must be letters, digits, '_', '-' or '.' "
                            "(no path)")
-    doc, sub, truth = evaluate(submission, dataset, split, part, meta=meta)
+    result, sub, truth = evaluate_submission(submission, dataset, split, part, meta=meta)
     folder = Path(root) / _slug(truth.dataset) / split
     eid = f"{_slug(str(sub.meta['method']))}-{sub.sha256[:8]}"
     path = folder / f"{eid}.json"
@@ -72,9 +78,9 @@ def add(submission: str | Path, dataset: str | Path, split: str, part: str = "te
         "added": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
         "method": sub.meta["method"], "recipe": sub.meta.get("recipe"), "seeds": sub.seeds,
         "meta": sub.meta, "submission_sha256": sub.sha256,
-        "dataset": doc["dataset"], "split": split, "part": part,
-        "metric_version": doc["metric_version"], "vtsbench_version": doc["vtsbench_version"],
-        "metrics": doc["tasks"], "rescored_from": [],
+        "dataset": result.dataset.to_dict(), "split": split, "part": part,
+        "metric_version": result.metric_version, "vtsbench_version": result.vtsbench_version,
+        "metrics": tasks_to_dict(result.tasks), "rescored_from": [],
         "predictions": {"sample_ids": truth.ids, "tasks": {
             t: {str(s): a.tolist() for s, a in by.items()} for t, by in sub.preds.items()}},
     }
@@ -102,12 +108,13 @@ def split_folders(root: str | Path) -> list[Path]:
     return sorted({p.parent for p in Path(root).glob("*/*/*.json")})
 
 
-def rescore(root: str | Path, dataset: str | Path, force: bool = False) -> list[Path]:
-    """Re-score the entries of a dataset whose metric version is not the current one (all with
-    force) from their stored predictions; returns the entries changed."""
-    from ..dataset.schema import load_info
-
-    info = load_info(dataset)
+def rescore(root: str | Path, dataset: str | Path | VtsDataset, force: bool = False
+            ) -> list[Path]:
+    """Re-score the entries of a dataset (a folder, a URL or a loaded one) whose metric version
+    is not the current one (all with force) from their stored predictions; returns the entries
+    changed."""
+    ds = open_dataset(dataset)
+    info = ds.info
     changed = []
     for folder in split_folders(root):
         for path, e in entries(folder):
@@ -119,66 +126,64 @@ def rescore(root: str | Path, dataset: str | Path, force: bool = False) -> list[
                 raise VtsError("entry was scored on another copy of the dataset (sha256 "
                                f"{e['dataset']['dataset_sha256'][:12]}, this one "
                                f"{info.dataset_sha256[:12]})", path)
-            truth = load_truth(dataset, e["split"], e["part"])
+            truth = load_truth(ds, e["split"], e["part"])
             stored = e["predictions"]
             pos = {s: i for i, s in enumerate(stored["sample_ids"])}
             order = np.array([pos[s] for s in truth.ids], dtype=np.int64)
             preds = {t: {int(s): np.asarray(a, np.int64)[order] for s, a in by.items()}
                      for t, by in stored["tasks"].items()}
             sub = Submission(path, e["meta"], e["submission_sha256"], preds)
-            motion = slip_motion(dataset, truth.ids) if truth.kind == "slip" else None
-            doc = score(truth, sub, motion)
-            if e["metric_version"] != doc["metric_version"]:
+            motion = slip_motion(ds, truth.ids) if truth.kind == "slip" else None
+            result = score(truth, sub, motion)
+            if e["metric_version"] != result.metric_version:
                 e["rescored_from"].append(e["metric_version"])
-            e.update(metric_version=doc["metric_version"], metrics=doc["tasks"],
-                     vtsbench_version=doc["vtsbench_version"])
+            e.update(metric_version=result.metric_version, metrics=tasks_to_dict(result.tasks),
+                     vtsbench_version=result.vtsbench_version)
             write_text_atomic(path, json.dumps(e, indent=1) + "\n")
             changed.append(path)
     return changed
 
 
-def _mean(e: dict[str, Any], task: str, metric: str) -> float | None:
-    t = e["metrics"].get(task)
-    return None if t is None else t["summary"].get(metric, {}).get("mean")
+@dataclass(frozen=True)
+class BoardEntry:
+    """What the tables show of a stored entry: method, recipe, seeds, where it was scored and
+    its typed scores per task."""
+
+    method: str
+    recipe: str | None
+    seeds: tuple[int, ...]
+    dataset: DatasetRef
+    split: str
+    part: str
+    metric_version: str
+    tasks: dict[str, TaskResult]
+
+    @classmethod
+    def from_dict(cls, e: Mapping[str, Any]) -> BoardEntry:
+        return cls(e["method"], e.get("recipe"), tuple(e["seeds"]),
+                   DatasetRef.from_dict(e["dataset"]), e["split"], e["part"],
+                   e["metric_version"], tasks_from_dict(e["metrics"]))
+
+    def headline(self, task: str) -> float | None:
+        """The mean over seeds of a task's headline metric (None without the task)."""
+        t = self.tasks.get(task)
+        return None if t is None else t.mean(TASKS[task].headline)
 
 
-def _acc(e: dict[str, Any], task: str) -> str:
-    t = e["metrics"].get(task)
-    if t is None:
-        return "-"
-    s = t["summary"]["accuracy"]
-    return pct(s["mean"]) + (f" ± {100 * s['std']:.2f}" if s["std"] is not None else "")
+Cells = tuple[str, Callable[[BoardEntry], str]]
 
 
-def _worst(e: dict[str, Any], task: str) -> str:
-    t = e["metrics"].get(task)
-    w = t["runs"][0].get("worst_object") if t else None
-    return "-" if not w else f"{w['object']} {pct(w['accuracy'])}"
+def _task_cells(col: Column) -> Cells:
+    return col.header, lambda e: cell(e.tasks.get(col.task), col)
 
 
-Column = tuple[str, Callable[[dict[str, Any]], str]]
-
-
-def _summary_columns(kind: str) -> list[Column]:
-    head: list[Column] = [("method", lambda e: e["method"]),
-                          ("recipe", lambda e: e.get("recipe") or "-"),
-                          ("seeds", lambda e: str(len(e["seeds"])))]
-    if kind == "slip":
-        mae = lambda e: "-" if _mean(e, "direction", "mean_abs_angular_error_deg") is None \
-            else f"{_mean(e, 'direction', 'mean_abs_angular_error_deg'):.1f}"  # noqa: E731
-        head += [("state %", lambda e: _acc(e, "state")),
-                 ("direction % (state given)", lambda e: _acc(e, "direction")),
-                 ("direction % end to end",
-                  lambda e: pct(_mean(e, "direction", "end_to_end_accuracy"))),
-                 ("within one bin %", lambda e: pct(_mean(e, "direction", "within_one_bin"))),
-                 ("angular error (deg)", mae),
-                 ("worst object, state %", lambda e: _worst(e, "state"))]
-    else:
-        head += [("object %", lambda e: _acc(e, "object")),
-                 ("balanced %", lambda e: pct(_mean(e, "object", "balanced_accuracy"))),
-                 ("macro-F1 %", lambda e: pct(_mean(e, "object", "macro_f1"))),
-                 ("worst object %", lambda e: _worst(e, "object"))]
-    return [*head, ("metric version", lambda e: e["metric_version"])]
+def _summary_columns(kind: str) -> list[Cells]:
+    """The summary table's columns: method, recipe, seeds, the kind's board, metric version."""
+    head: list[Cells] = [("method", lambda e: e.method),
+                         ("recipe", lambda e: e.recipe or "-"),
+                         ("seeds", lambda e: str(len(e.seeds)))]
+    return [*head, *(_task_cells(c) for c in BOARDS[kind].columns),
+            ("metric version", lambda e: e.metric_version)]
 
 
 def md_cell(value: Any) -> str:
@@ -189,7 +194,7 @@ def md_cell(value: Any) -> str:
     return text.replace("<", "&lt;").replace(">", "&gt;")[:200]
 
 
-def _table(cols: list[Column], rows: list[dict[str, Any]]) -> list[str]:
+def _table(cols: list[Cells], rows: list[BoardEntry]) -> list[str]:
     out = ["| " + " | ".join(c for c, _ in cols) + " |", "|---" * len(cols) + "|"]
     return out + ["| " + " | ".join(md_cell(f(r)) for _, f in cols) + " |"
                   for r in rows]
@@ -204,26 +209,26 @@ def _version_key(version: str) -> tuple[int, ...]:
     return (*nums, 0 if dash else 1)
 
 
-def current_version(es: list[dict[str, Any]]) -> str:
+def current_version(es: list[BoardEntry]) -> str:
     """The newest dataset version among the entries: the one the leaderboard ranks."""
-    return max((e["dataset"]["dataset_version"] for e in es), key=_version_key)
+    return max((e.dataset.dataset_version for e in es), key=_version_key)
 
 
 def render_folder(folder: Path) -> str:
     """The markdown of one dataset/split folder: the entries of the newest dataset version
     ranked, those scored on an earlier version listed apart as not comparable."""
-    every = [e for _, e in entries(folder)]
+    every = [BoardEntry.from_dict(e) for _, e in entries(folder)]
     if not every:
         return ""
     version = current_version(every)
-    es = [e for e in every if e["dataset"]["dataset_version"] == version]
-    old = [e for e in every if e["dataset"]["dataset_version"] != version]
-    kind = "slip" if any(t in es[0]["metrics"] for t in ("state", "direction")) else "static"
-    main = "state" if kind == "slip" else "object"
-    es.sort(key=lambda e: -(_mean(e, main, "accuracy") or -1.0))
-    split = es[0]["split"]
-    lines = [f"# {md_cell(es[0]['dataset']['name'])} / {md_cell(split)} "
-             f"({md_cell(es[0]['part'])})", "",
+    es = [e for e in every if e.dataset.dataset_version == version]
+    old = [e for e in every if e.dataset.dataset_version != version]
+    kind = kind_of(list(es[0].tasks))
+    main = BOARDS[kind].rank
+    es.sort(key=lambda e: -(e.headline(main) or -1.0))
+    split = es[0].split
+    lines = [f"# {md_cell(es[0].dataset.name)} / {md_cell(split)} "
+             f"({md_cell(es[0].part)})", "",
              f"Dataset version {md_cell(version)}: {len(es)} entries, best {main} accuracy "
              "first; mean ± standard deviation over seeds where there are several."
              + (f" {len(old)} entries scored on an earlier version are listed at the end." if old
@@ -232,34 +237,23 @@ def render_folder(folder: Path) -> str:
     lines += _table(cols, es)
     if split in PAPER:
         ref = PAPER[split]
-        cells = {"method": "paper (reference)", "recipe": "-", "seeds": "-"}
-        cells.update({"state %": ref.get("state"), "direction % (state given)":
-                      ref.get("direction"), "object %": ref.get("object")})
+        cells: dict[str, Any] = {"method": "paper (reference)", "recipe": "-", "seeds": "-"}
+        cells.update({headline_column(t).header: ref.get(t.name) for t in TASKS.values()})
         lines.append("| " + " | ".join("-" if cells.get(c) is None else str(cells[c])
                                         for c, _ in cols) + " |")
         lines += ["", f"_{PAPER_NOTE}_"]
-    for task in ("state", "direction", "object"):
-        rows = [e for e in es if task in e["metrics"]]
+    for task in TASKS.values():
+        rows = [e for e in es if task.name in e.tasks]
         if not rows:
             continue
-        det: list[Column] = [
-            ("method", lambda e: e["method"]),
-            ("n", lambda e, t=task: str(e["metrics"][t]["runs"][0]["n"])),
-            ("accuracy %", lambda e, t=task: _acc(e, t)),
-            ("95 % CI (first seed)", lambda e, t=task: "[{}, {}]".format(
-                *map(pct, e["metrics"][t]["runs"][0]["accuracy_ci95"]))),
-            ("balanced %", lambda e, t=task: pct(_mean(e, t, "balanced_accuracy"))),
-            ("macro-F1 %", lambda e, t=task: pct(_mean(e, t, "macro_f1"))),
-            ("worst object %", lambda e, t=task: _worst(e, t))]
-        if task == "direction":
-            det.insert(6, ("adjacent share of errors %",
-                           lambda e: pct(_mean(e, "direction", "adjacent_error_share"))))
-        lines += ["", f"## {task}", "", *_table(det, rows)]
+        det: list[Cells] = [("method", lambda e: e.method),
+                            *(_task_cells(c) for c in task_columns(task))]
+        lines += ["", f"## {task.name}", "", *_table(det, rows)]
     if old:
-        old.sort(key=lambda e: (_version_key(e["dataset"]["dataset_version"]),
-                                -(_mean(e, main, "accuracy") or -1.0)))
-        cols_old: list[Column] = [("dataset version", lambda e: e["dataset"]["dataset_version"]),
-                                  *cols]
+        old.sort(key=lambda e: (_version_key(e.dataset.dataset_version),
+                                -(e.headline(main) or -1.0)))
+        cols_old: list[Cells] = [("dataset version", lambda e: e.dataset.dataset_version),
+                                 *cols]
         lines += ["", "## Scored on an earlier dataset version", "",
                   f"Not comparable with the entries above: the dataset changed (version "
                   f"{md_cell(version)} is current). Kept for the record; submit again on the "

@@ -5,7 +5,7 @@ The slip distance of a sequence is the length of its labelled motion (the index'
 mm per pixel (x and y apart), times the input scale the submission states (model-input pixels
 per sensor pixel, `input_scale_xy` in its metadata; 1 when absent). Bins are half-open
 [lo, hi) in mm; a sample whose motion is unknown (NaN) counts apart. Pure numpy apart from the
-index read.
+index read (through `vtsbench.load`).
 """
 
 from __future__ import annotations
@@ -14,22 +14,26 @@ import math
 from collections.abc import Sequence
 from itertools import pairwise
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ..dataset.loader import VtsDataset
 
 #: Bin edges in mm (half-open [lo, hi)); the simulator's slips run from 0.08 to 1.5 mm, the
 #: slip threshold is 0.05 mm.
 MAGNITUDE_EDGES_MM: tuple[float, ...] = (0.0, 0.1, 0.2, 0.4, 0.8, math.inf)
 
 
-def slip_motion(dataset: str | Path, ids: Sequence[str]) -> dict[str, np.ndarray]:
+def slip_motion(dataset: str | Path | VtsDataset, ids: Sequence[str]) -> dict[str, np.ndarray]:
     """Per sample id (in the given order): motion dx, dy (mm, image frame) and mm per pixel x, y
-    from the slip index; NaN where unknown."""
-    import pyarrow.parquet as pq
+    from the slip index of a dataset (a folder, a URL or one `vtsbench.load` loaded); NaN where
+    unknown."""
+    from .submission import open_dataset
 
     cols = ["sample_id", "motion_dx_mm", "motion_dy_mm", "mm_per_px_x", "mm_per_px_y"]
-    table = pq.read_table(Path(dataset) / "index" / "slip.parquet", columns=cols).to_pydict()
+    table = open_dataset(dataset).slip.index.select(cols).to_pydict()
     pos = {s: i for i, s in enumerate(table["sample_id"])}
 
     def col(name: str) -> np.ndarray:

@@ -22,10 +22,10 @@ from typing import Any
 
 import numpy as np
 
+from ..labels import BIN_DEG, N_DIRECTIONS
+
 #: Version of the metric definitions; a change makes stored leaderboard entries stale.
 METRIC_VERSION = "1.0"
-N_DIRECTIONS = 8
-BIN_DEG = 360.0 / N_DIRECTIONS
 BOOTSTRAP = 1000
 NAN = float("nan")
 

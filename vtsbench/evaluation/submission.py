@@ -16,16 +16,16 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..errors import VtsError, one_line
-from ..labels import DIRECTION_NAMES, STATES
+from .tasks import SLIP, STATE, TASKS, tasks_of
 
-#: Task -> the index kind it is scored on.
-TASKS = {"state": "slip", "direction": "slip", "object": "static"}
-SLIP = STATES.index("slip")
+if TYPE_CHECKING:
+    from ..dataset.loader import VtsDataset
+
 MAX_SHOWN = 3
 #: Characters of one offender shown (a 5 MB name is cut, with its length).
 MAX_EXAMPLE = 120
@@ -54,18 +54,18 @@ class Truth:
 
     def required(self, task: str) -> np.ndarray:
         """Positions that must have a prediction: every sample, or the true slips (direction)."""
-        if task == "direction":
-            return np.flatnonzero(self.labels["state"] == SLIP)
+        if TASKS[task].slips_only:
+            return np.flatnonzero(self.labels[STATE.name] == SLIP)
         return np.arange(len(self.ids))
 
 
-def load_truth(dataset: str | Path, split: str, part: str = "test") -> Truth:
+def load_truth(dataset: str | Path | VtsDataset, split: str, part: str = "test") -> Truth:
     """Labels of a split part from info.json, the split file and the index (no arrays read),
-    read and checked by `vtsbench.load` as any use of the dataset is (a leaking split refused)."""
-    from ..dataset.loader import load
+    read and checked by `vtsbench.load` as any use of the dataset is (a leaking split refused).
 
-    root = Path(dataset)
-    ds = load(dataset)
+    `dataset`: a folder, any URL `vtsbench.load` takes, or a dataset it loaded."""
+    ds = open_dataset(dataset)
+    root = ds.location
     info = ds.info
     if split not in info.splits:
         raise VtsError(f"no split {split!r}; splits are {', '.join(sorted(info.splits)) or '-'}",
@@ -74,9 +74,8 @@ def load_truth(dataset: str | Path, split: str, part: str = "test") -> Truth:
     if part not in sp.parts:
         raise VtsError(f"split {split!r} has no part {part!r}; parts are "
                        f"{', '.join(sp.parts)}", root)
-    cols = ["sample_id", "object", "class_idx"]
-    if sp.kind == "slip":
-        cols += ["state_idx", "direction"]
+    tasks = tasks_of(sp.kind)
+    cols = ["sample_id", "object", *(t.label_column for t in tasks)]
     table = ds.view(sp.kind).index.select(cols).to_pydict()
     pos = {s: i for i, s in enumerate(table["sample_id"])}
     ids = sorted(sp.parts[part])
@@ -88,14 +87,20 @@ def load_truth(dataset: str | Path, split: str, part: str = "test") -> Truth:
         return np.array([-1 if table[name][r] is None else table[name][r] for r in rows],
                         dtype=np.int64)
 
-    if sp.kind == "slip":
-        labels = {"state": col("state_idx"), "direction": col("direction")}
-        labels["direction"][labels["state"] != SLIP] = -1
-        names = {"state": STATES, "direction": DIRECTION_NAMES}
-    else:
-        labels, names = {"object": col("class_idx")}, {"object": tuple(info.objects)}
+    labels = {t.name: col(t.label_column) for t in tasks}
+    for t in tasks:
+        if t.slips_only:  # undefined unless the true state is slip
+            labels[t.name][labels[STATE.name] != SLIP] = -1
+    names = {t.name: t.class_names(info.objects) for t in tasks}
     return Truth(info.name, info.dataset_version, info.dataset_sha256, split, part, sp.kind, ids,
                  [table["object"][r] for r in rows], labels, names)
+
+
+def open_dataset(dataset: str | Path | VtsDataset) -> VtsDataset:
+    """A dataset loaded by `vtsbench.load` from a folder or URL (a loaded one as it is)."""
+    from ..dataset.loader import VtsDataset, load
+
+    return dataset if isinstance(dataset, VtsDataset) else load(dataset)
 
 
 @dataclass
@@ -285,9 +290,9 @@ def _check_rows(cols: dict[str, list[Any]], n: int, truth: Truth, probs: Problem
         if not sid:
             probs.add("NaN or empty values", f"row {r + 1} sample_id")
             continue
-        if task not in TASKS or TASKS[task] != truth.kind:
+        if task not in TASKS or TASKS[task].kind != truth.kind:
             probs.add(f"unknown tasks (a {truth.kind} split scores "
-                      f"{', '.join(t for t, k in TASKS.items() if k == truth.kind)})", task or "''")
+                      f"{', '.join(t.name for t in tasks_of(truth.kind))})", task or "''")
             continue
         seed = 0
         if seeds is not None:

@@ -1,13 +1,12 @@
-"""ResNet-50 for static recognition: model, training-time augmentation and Grad-CAM.
+"""ResNet-50 for static recognition: the model and Grad-CAM, which explains its predictions.
 
 The network is torchvision's ``resnet50(weights=None)``; ImageNet weights are optional and
 read from a local file only. Inputs are float tensors ``(B, C, H, W)``: RGB in [0, 1]
-(normalise after ``augment``) with C = 3, or depth with C = 1.
+(normalise after ``vtsbench.transforms.augment.augment``) with C = 3, or depth with C = 1.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -17,7 +16,9 @@ from torch import nn
 from torch.nn import functional as F
 
 from vtsbench.errors import VtsError
-from vtsbench.models.timesformer import adapt_patch_weight, channels_of
+from vtsbench.models.timesformer import adapt_patch_weight
+from vtsbench.transforms.augment import augment  # noqa: F401 - moved there; old import path
+from vtsbench.transforms.modality import channels_of
 
 NUM_CLASSES = 15
 
@@ -80,81 +81,6 @@ def static_resnet(
             model.conv1.weight.copy_(adapt_patch_weight(old.weight, 1))
     model.fc = nn.Linear(model.fc.in_features, num_classes)
     return model
-
-
-def _uniform(generator: torch.Generator, lo: float, hi: float) -> float:
-    return lo + (hi - lo) * float(torch.rand((), generator=generator))
-
-
-def _border_median(img: torch.Tensor) -> list[float]:
-    """Per channel, the median of the outermost row and column pixels of (C, H, W)."""
-    edge = torch.cat([img[:, 0], img[:, -1], img[:, 1:-1, 0], img[:, 1:-1, -1]], dim=1)
-    return [float(v) for v in edge.median(dim=1).values]
-
-
-def augment(
-    batch: torch.Tensor,
-    modality: str,
-    generator: torch.Generator,
-    *,
-    jitter: float = 0.3,
-    max_rotation: float = 15.0,
-    crop_scale: tuple[float, float] = (0.8, 1.0),
-    fill: str = "zero",
-) -> torch.Tensor:
-    """Training-time augmentation of a batch ``(B, C, H, W)``, deterministic given ``generator``.
-
-    Per sample: colour jitter (brightness, contrast, saturation by factors in
-    [1 - jitter, 1 + jitter]) on the RGB channels only (``rgb``, and the first three of
-    ``rgbd``); then the same geometric transform on every channel: horizontal and vertical
-    flips (p = 0.5 each), a rotation in [-max_rotation, max_rotation] degrees (``fill``) and a
-    random resized crop back to (H, W). Depth values are only moved, never rescaled (bilinear
-    resampling aside). RGB is expected in [0, 1]. ``fill``: what the rotation brings into the
-    corners: ``zero``, or ``border``, each channel's median over the sample's outermost pixels
-    (on a contact crop the untouched gel, so a turned crop has no black corners that no test
-    frame has).
-    """
-    if fill not in ("zero", "border"):
-        raise ValueError(f"fill must be 'zero' or 'border', not {fill!r}")
-    from torchvision.transforms.v2 import functional as TF
-
-    channels = channels_of(modality)
-    if batch.ndim != 4 or batch.shape[1] != channels:
-        raise ValueError(f"expected (B, {channels}, H, W) for {modality}, got {tuple(batch.shape)}")
-    h, w = batch.shape[-2:]
-    out = []
-    for img in batch:
-        if modality in ("rgb", "rgbd"):
-            rgb = img[:3]
-            rgb = TF.adjust_brightness(rgb, _uniform(generator, 1 - jitter, 1 + jitter))
-            rgb = TF.adjust_contrast(rgb, _uniform(generator, 1 - jitter, 1 + jitter))
-            rgb = TF.adjust_saturation(rgb, _uniform(generator, 1 - jitter, 1 + jitter))
-            img = torch.cat([rgb, img[3:]], dim=0)
-        if float(torch.rand((), generator=generator)) < 0.5:
-            img = TF.horizontal_flip(img)
-        if float(torch.rand((), generator=generator)) < 0.5:
-            img = TF.vertical_flip(img)
-        angle = _uniform(generator, -max_rotation, max_rotation)
-        img = TF.rotate(img, angle, interpolation=TF.InterpolationMode.BILINEAR,
-                        fill=_border_median(img) if fill == "border" else 0.0)
-        area = _uniform(generator, *crop_scale) * h * w
-        ratio = math.exp(_uniform(generator, math.log(3 / 4), math.log(4 / 3)))
-        ch = min(h, max(1, round(math.sqrt(area / ratio))))
-        cw = min(w, max(1, round(math.sqrt(area * ratio))))
-        top = int(torch.randint(0, h - ch + 1, (), generator=generator))
-        left = int(torch.randint(0, w - cw + 1, (), generator=generator))
-        img = TF.resized_crop(
-            img,
-            top,
-            left,
-            ch,
-            cw,
-            [h, w],
-            interpolation=TF.InterpolationMode.BILINEAR,
-            antialias=True,
-        )
-        out.append(img)
-    return torch.stack(out)
 
 
 def grad_cam(

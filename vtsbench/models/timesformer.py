@@ -24,12 +24,13 @@ from torch import nn
 from torch.nn import functional as F
 
 from vtsbench.errors import VtsError
+from vtsbench.transforms.modality import CHANNELS, channels_of  # noqa: F401 - CHANNELS: old path
+from vtsbench.transforms.symmetry import flip_augment  # noqa: F401 - moved there; old path
 
 PAPER_CHECKPOINT = "facebook/timesformer-base-finetuned-ssv2"
 NUM_STATES = 3
 NUM_DIRECTIONS = 8
 SLIP = 2
-CHANNELS = {"rgb": 3, "depth": 1, "rgbd": 4}
 
 
 @dataclass(frozen=True)
@@ -54,13 +55,6 @@ CONFIGS = {
 
 class PretrainedWeightsMissing(VtsError):
     """The pretrained TimeSformer weights are not on disk."""
-
-
-def channels_of(modality: str) -> int:
-    """Number of input channels of a modality: rgb 3, depth 1, rgbd 4."""
-    if modality not in CHANNELS:
-        raise VtsError(f"unknown modality {modality!r}; expected one of {sorted(CHANNELS)}")
-    return CHANNELS[modality]
 
 
 def backbone_config(
@@ -294,28 +288,6 @@ def masked_joint_loss(
         return loss_state + 0.0 * dir_logits.sum()
     loss_dir = F.cross_entropy(dir_logits[mask], direction.long()[mask])
     return loss_state + lam * loss_dir
-
-
-def flip_augment(x: torch.Tensor, direction: torch.Tensor, generator: torch.Generator
-                 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Mirror each sequence of ``x`` (B, T, C, H, W) left-right and up-down with p = 0.5 each
-    (draws from ``generator``) and map its direction label to match (``MIRROR_X``,
-    ``MIRROR_Y``); labels < 0 (no direction) stay. Mirrors commute with the anisotropic resize
-    of a 480x640 frame to a square, so the labels stay exact, unlike 90-degree rotations."""
-    from vtsbench.labels import MIRROR_X, MIRROR_Y
-
-    b = x.shape[0]
-    fx = torch.rand(b, generator=generator) < 0.5
-    fy = torch.rand(b, generator=generator) < 0.5
-    x = torch.where(fx.view(b, 1, 1, 1, 1).to(x.device), x.flip(-1), x)
-    x = torch.where(fy.view(b, 1, 1, 1, 1).to(x.device), x.flip(-2), x)
-    d = direction.long()
-    valid = d >= 0
-    mx = torch.tensor(MIRROR_X, device=d.device)[d.clamp(0, len(MIRROR_X) - 1)]
-    d = torch.where(valid & fx.to(d.device), mx, d)
-    my = torch.tensor(MIRROR_Y, device=d.device)[d.clamp(0, len(MIRROR_Y) - 1)]
-    d = torch.where(valid & fy.to(d.device), my, d)
-    return x, d
 
 
 def count_parameters(module: nn.Module, trainable_only: bool = False) -> int:

@@ -1,4 +1,5 @@
-"""Recordings: the manifest format, media access, import from existing folders and checks."""
+"""Recordings: the manifest format, media access, import from existing folders, capture
+(collect), checks, previews and Taxim data packs."""
 
 from .manifest import (
     MANIFEST_NAME,

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..labels import DIRECTION_NAMES, STATES
+from ...labels import DIRECTION_NAMES, STATES
 
 
 def labels_text(info: Any, class_idx: int | None, state_idx: int | None = None,

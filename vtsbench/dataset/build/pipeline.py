@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..errors import VtsError
+from ...errors import VtsError
+from ..format.layout import ARRAYS, KINDS, RGB_ONLY
 from .execute import dask_client, process_pool, run_with_progress
 from .finish import finish, write_plan_files
 from .options import BuildOptions, check_options
@@ -45,7 +46,7 @@ from .staging import (
     shard_done,
     shard_tasks,
 )
-from .store import ARRAYS, KINDS, RGB_ONLY, samples_per_shard
+from .store import samples_per_shard
 
 __all__ = ["WORK", "BuildOptions", "BuildResult", "build", "partial_path"]
 
@@ -71,7 +72,7 @@ class BuildResult:
 def build(recordings: str | Path, out: str | Path, opts: BuildOptions | None = None,
           log: Callable[[str], None] | None = None) -> BuildResult:
     """Build the dataset of a recordings folder into OUT (atomic: complete or absent)."""
-    from ..recordings.manifest import load_manifest
+    from ...recordings.manifest import load_manifest
 
     opts = opts or BuildOptions()
     say = log or (lambda _msg: None)

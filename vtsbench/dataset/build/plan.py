@@ -6,13 +6,18 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ..errors import VtsError
-from ..recordings.manifest import Entry, Manifest
+from ...errors import VtsError
+from ...recordings.manifest import Entry, Manifest
+from ..format.arrays import Layout
+from ..format.index import extra_column_name
+from ..format.layout import ARRAYS, KINDS
+from ..format.records import SampleMeta
 from .options import BuildOptions
-from .schema import SampleMeta
-from .store import ARRAYS, KINDS, Layout
+
+if TYPE_CHECKING:
+    from ..splits.schemes import SplitReport
 
 CALIBRATION_NAME = "calibration.safetensors"
 
@@ -70,7 +75,7 @@ def screen_entries(root: Path, manifest: Manifest, frames: int,
     belongs to no entry (a duplicate id) is an error for the whole build. Adds what a build
     needs beyond a valid folder: an object name, T frames.
     """
-    from ..recordings.check import check_folder
+    from ...recordings.check import check_folder
 
     report = check_folder(root, deep=False, workers=max(1, workers), decode=False,
                           progress=progress)
@@ -104,7 +109,7 @@ def screen_entries(root: Path, manifest: Manifest, frames: int,
 
 
 def _sequence_length(root: Path, e: Entry) -> int:
-    from ..recordings.media import probe
+    from ...recordings.media import probe
 
     start = e.source.start or 0
     stop = (e.source.stop if e.source.stop is not None
@@ -175,8 +180,6 @@ def extra_columns(manifest: Manifest, sources: dict[str, list[SampleSource]]
                   ) -> dict[str, dict[str, list[str | None]]]:
     """The recordings' own fields as extra index columns per kind: an entry's `take` and every
     key of its `meta` (pattern fields such as camera or split), as strings, None where absent."""
-    from .schema import extra_column_name
-
     entries = {e.id: e for e in manifest.entries}
     out: dict[str, dict[str, list[str | None]]] = {}
     for kind, srcs in sources.items():
@@ -212,7 +215,7 @@ def session_resolution(manifest: Manifest, sessions: set[str]) -> tuple[int, int
 
 def load_checked_calibration(path: Path, manifest: Manifest, plan_sessions: set[str]) -> Any:
     """The calibration, checked against the sensor and resolution of every used session."""
-    from ..depth.calibration import load_calibration
+    from ...depth.calibration import load_calibration
 
     cal = None
     for sid in sorted(plan_sessions):
@@ -231,9 +234,9 @@ def bad_error(bad: dict[str, str]) -> VtsError:
                     "leave it out")
 
 
-def add_given_splits(report: Any, plan: Plan, opts: BuildOptions) -> None:
+def add_given_splits(report: SplitReport, plan: Plan, opts: BuildOptions) -> None:
     """Add the splits a user gives (--holdout-objects, --split-file), leak-checked."""
-    from .given_splits import check_given, given_objects_split, read_object_list, read_split_file
+    from ..splits.given import check_given, given_objects_split, read_object_list, read_split_file
 
     given = []
     if opts.holdout_objects is not None:
@@ -248,9 +251,10 @@ def add_given_splits(report: Any, plan: Plan, opts: BuildOptions) -> None:
         report.splits.append(sp)
 
 
-def plan_splits(plan: Plan, seed: int) -> Any:
+def plan_splits(plan: Plan, seed: int) -> SplitReport:
     """The split files of the plan's samples, leak-checked: a leak is a build error."""
-    from .splits import leak_check, make_splits
+    from ..splits.leaks import leak_check
+    from ..splits.schemes import make_splits
 
     res = plan.layouts["static"].frame
     report = make_splits(plan.samples, seed=seed, resolution=res)
@@ -266,7 +270,7 @@ def frame_and_calibration(cal_path: Path | None, manifest: Manifest, bad: dict[s
                           ) -> tuple[Any, str, tuple[int, int], tuple[float, float] | None]:
     """The calibration (checked against every used session), its sha256, the frame size and
     the scale in mm per pixel; without a calibration (--no-depth) the sessions' frame size."""
-    from .provenance import sha256_file
+    from ..format.provenance import sha256_file
 
     used = {e.session for e in manifest.entries if e.kind != "press" and e.id not in bad}
     if cal_path is None:

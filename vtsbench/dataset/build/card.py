@@ -9,19 +9,40 @@ plan and info, with fixed encoder settings: the same build gives the same bytes.
 from __future__ import annotations
 
 import io
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..atomic import write_bytes_atomic
-from .hub_layout import HUB_DIR, HubLayout, configs_yaml, default_config, size_category
+from ...atomic import write_bytes_atomic
+from ..format.layout import (
+    ARRAYS,
+    BUILD_REPORT_PATH,
+    CARD_PATH,
+    DEPTH_SCALE_MM,
+    INFO_PATH,
+    KINDS,
+    PREVIEW_DIR,
+    SPLITS_DIR,
+    group_path,
+    index_path,
+    preview_path,
+)
 from .png import depth_preview_pngs, encode_png
-from .store import ARRAYS, DEPTH_SCALE_MM, KINDS
 
 if TYPE_CHECKING:
-    from .build import Plan
-    from .schema import DatasetInfo
+    from ..format.info import DatasetInfo
+    from .plan import Plan
+
+@dataclass(frozen=True)
+class HubCard:
+    """What the Hugging Face copy (`vtsbench export-hf`) adds to the card: its YAML config
+    lines (listed first, one of them the default) and its section."""
+
+    configs: list[str]
+    section: str
+
 
 #: Samples shown per kind (evenly spaced rows): full-size PNGs, so few for slip (T frames).
 PREVIEW_SAMPLES = {"static": 8, "slip": 4}
@@ -97,7 +118,7 @@ def preview_bytes(root: Path, plan: Plan, kind: str, workers: int = 1,
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from .store import open_group
+    from ..read.store import open_group
 
     seq = kind == "slip"
     arrays = plan.layouts[kind].arrays
@@ -128,30 +149,39 @@ def preview_bytes(root: Path, plan: Plan, kind: str, workers: int = 1,
 def write_preview(root: Path, plan: Plan, workers: int = 1,
                   pngs: dict[str, Pngs] | None = None) -> None:
     """preview/static.parquet and preview/slip.parquet (pngs: per kind, see preview_bytes)."""
-    (root / "preview").mkdir(exist_ok=True)
+    (root / PREVIEW_DIR).mkdir(exist_ok=True)
     for kind in KINDS:
-        write_bytes_atomic(root / "preview" / f"{kind}.parquet",
-                   preview_bytes(root, plan, kind, workers, (pngs or {}).get(kind)))
+        write_bytes_atomic(root / preview_path(kind),
+                           preview_bytes(root, plan, kind, workers, (pngs or {}).get(kind)))
 
 
-def _configs(plan: Plan, hub: HubLayout | None = None) -> str:
+def size_category(n: int) -> str:
+    """The Hub's size_categories value for n rows."""
+    for limit, name in ((1_000, "n<1K"), (10_000, "1K<n<10K"), (100_000, "10K<n<100K"),
+                        (1_000_000, "100K<n<1M"), (10_000_000, "1M<n<10M")):
+        if n < limit:
+            return name
+    return "n>10M"
+
+
+def _configs(plan: Plan, hub: HubCard | None = None) -> str:
     """The YAML `configs` list: the hub configs first when there is a hub copy (the first slip
     scheme is the default), then the indexes (the slip index is the default without a hub
     copy) and the previews."""
     lines = ["configs:"]
     if hub is not None:
-        lines += configs_yaml(hub, default_config(hub))
+        lines += hub.configs
     for kind in ("slip", "static"):
         if not plan.layouts[kind].n:
             continue
         lines += [f"- config_name: {kind}", "  data_files:", "  - split: index",
-                  f"    path: index/{kind}.parquet"]
+                  f"    path: {index_path(kind)}"]
         if hub is None and (kind == "slip" or not plan.layouts["slip"].n):
             lines.append("  default: true")
     for kind in ("slip", "static"):
         if plan.layouts[kind].n:
             lines += [f"- config_name: preview_{kind}", "  data_files:", "  - split: preview",
-                      f"    path: preview/{kind}.parquet"]
+                      f"    path: {preview_path(kind)}"]
     return "\n".join(lines)
 
 
@@ -164,10 +194,10 @@ def _yaml_str(text: str) -> str:
 TASK_CATEGORIES = ("image-classification", "video-classification", "depth-estimation")
 
 
-def card_text(info: DatasetInfo, plan: Plan, hub: HubLayout | None = None,
+def card_text(info: DatasetInfo, plan: Plan, hub: HubCard | None = None,
               license: str = "unknown") -> str:
     """README.md: YAML header (license, task categories, size, configs) and a human
-    description of the dataset; with `hub` (export-hf) its configs and how to load them."""
+    description of the dataset; with `hub` (export-hf) its configs and section."""
     lay = plan.layouts
     t = info.frames_per_sequence
     h, w = info.resolution
@@ -188,16 +218,17 @@ def card_text(info: DatasetInfo, plan: Plan, hub: HubLayout | None = None,
         f"`{info.splits[name][:16]}` |" for name, parts in info.counts.splits.items())
     cal = info.calibration
     comp = f"zstd level {info.zarr.level}" if info.zarr.level else "none"
+    groups = f"`{group_path('static')}` and `{group_path('slip')}`"
     if depth:
         what = f"""\
 Visuo-tactile RGB-D dataset built by `vtsbench build` (dataset version {info.dataset_version},
 format {info.format_version}). Every RGB frame ({h}x{w}) is paired one to one with a depth map
 generated by the sensor's calibration and a contact mask."""
         arrays = f"""\
-`data/static.zarr` and `data/slip.zarr` are Zarr v3 groups with `rgb` (uint8, RGB),
+{groups} are Zarr v3 groups with `rgb` (uint8, RGB),
 `depth` (int16; value x {info.depth_scale_mm} = mm of indentation into the gel) and `contact`
 (bool), one sample per chunk, shards of whole samples, {comp} with a crc32c per chunk. Row r of
-each array is row r of `index/<kind>.parquet`.
+each array is row r of `{index_path("<kind>")}`.
 
 The preview tables hold PNGs: `rgb` as RGB, `depth` colour-mapped (viridis, 0 up to the
 sample's maximum depth or 0.05 mm, whichever is larger; negative depth shown as 0) and `contact`
@@ -211,9 +242,9 @@ Visuo-tactile RGB dataset built by `vtsbench build --no-depth` (dataset version
 {info.dataset_version}, format {info.format_version}): RGB frames ({h}x{w}) only, with **no depth
 and no contact arrays** (the sensor had no calibration)."""
         arrays = f"""\
-`data/static.zarr` and `data/slip.zarr` are Zarr v3 groups with `rgb` (uint8, RGB) only: no
+{groups} are Zarr v3 groups with `rgb` (uint8, RGB) only: no
 `depth` or `contact` array. One sample per chunk, shards of whole samples, {comp} with a crc32c
-per chunk. Row r of `rgb` is row r of `index/<kind>.parquet`.
+per chunk. Row r of `rgb` is row r of `{index_path("<kind>")}`.
 
 The preview tables hold the RGB frames as PNGs."""
         provenance = "- no calibration, no depth: built with `--no-depth`"
@@ -247,13 +278,13 @@ index = datasets.load_dataset("path/to/this/folder", "slip")          # the parq
 preview = datasets.load_dataset("path/to/this/folder", "preview_slip")  # a few samples, PNGs
 ```
 
-{_hub_section(info, hub) if hub is not None else ""}## Arrays
+{hub.section if hub is not None else ""}## Arrays
 
 {arrays}
 
 ## Splits
 
-Made once at build time (seed {info.build.get("seed", 0)}), stored in `meta/splits/` and
+Made once at build time (seed {info.build.get("seed", 0)}), stored in `{SPLITS_DIR}/` and
 checked for leaks:
 
 | split | parts | sha256 |
@@ -264,7 +295,7 @@ checked for leaks:
 
 {provenance}
 - vtsbench {info.vtsbench_version}; build parameters, per-file sha256 and the content checksum
-  in `meta/info.json`; skipped recordings in `meta/build_report.json`
+  in `{INFO_PATH}`; skipped recordings in `{BUILD_REPORT_PATH}`
 - dataset_sha256: `{info.dataset_sha256}`
 
 Check a copy with `vtsbench verify <folder>`; summarise it with `vtsbench info <folder>`.
@@ -273,46 +304,7 @@ Check a copy with `vtsbench verify <folder>`; summarise it with `vtsbench info <
 
 def write_card(root: Path, info: DatasetInfo, plan: Plan) -> None:
     """Write README.md."""
-    write_bytes_atomic(root / "README.md", card_text(info, plan).encode("utf-8"))
-
-
-def _hub_section(info: DatasetInfo, hub: HubLayout) -> str:
-    """The card's section on the parquet copy under hf/ and its configs."""
-    n_rows = {f.path: f.rows for fs in hub.files.values() for f in fs}
-    rows = "\n".join(f"| `{name}` | {hub.kinds[name]} | "
-                     f"{', '.join(f'{s} {sum(n_rows[p] for p in fs)}' for s, fs in splits.items())}"
-                     " |" for name, splits in hub.configs.items())
-    first = default_config(hub) or ""
-    first_split = next(iter(hub.configs.get(first, {"train": []})), "train")
-    depth = f"""\
-`depth` is float32 **millimetres** of indentation into the gel (positive into the gel): the
-stored int16 counts x {info.depth_scale_mm}, exactly what `vtsbench.load` returns; `contact`
-is the contact mask as 1-bit PNG images (bool in numpy); `depth_preview` is the depth
-colour-mapped for viewing
-(viridis, from 0 to the sample's maximum or 0.05 mm, whichever is larger).""" if (
-        info.has_depth) else "This dataset has no depth: `rgb` and the labels only."
-    return f"""## Hugging Face datasets
-
-Every sample is in `{HUB_DIR}/` as parquet, once: a file holds the samples that share their part
-in every split scheme, so each config below is a list of whole files per split. `rgb` holds the
-frames as lossless PNG images (a list of {info.frames_per_sequence} for a slip sample) that decode
-to exactly the stored uint8 pixels; `object`, `state` and `direction` are `ClassLabel`s with the
-project's names. {depth}
-
-| config | kind | samples per split |
-|---|---|---|
-{rows}
-
-```python
-import datasets
-train = datasets.load_dataset("path/to/this/folder", "{first}", split="{first_split}")
-stream = datasets.load_dataset("path/to/this/folder", "{first}", split="{first_split}",
-                               streaming=True)
-row = next(iter(stream.with_format("numpy")))  # rgb uint8, depth float32 mm, contact bool
-names = train.features["object"].names
-```
-
-"""
+    write_bytes_atomic(root / CARD_PATH, card_text(info, plan).encode("utf-8"))
 
 
 def plan_of(info: DatasetInfo, index: dict[str, Any]) -> Any:
@@ -320,8 +312,8 @@ def plan_of(info: DatasetInfo, index: dict[str, Any]) -> Any:
     tables), enough to write its card again."""
     from types import SimpleNamespace
 
-    from .schema import SampleMeta
-    from .store import Layout
+    from ..format.arrays import Layout
+    from ..format.records import SampleMeta
 
     layouts = {k: Layout(k, info.shapes[k]["rgb"][0], tuple(info.resolution),
                          info.frames_per_sequence if k == "slip" else None,
@@ -329,9 +321,3 @@ def plan_of(info: DatasetInfo, index: dict[str, Any]) -> Any:
                for k in KINDS}
     samples = [SampleMeta.from_row(r, k) for k in KINDS for r in index[k].to_pylist()]
     return SimpleNamespace(layouts=layouts, samples=samples)
-
-
-def write_hub_card(root: Path, ds: Any, hub: HubLayout, license: str) -> None:
-    """README.md of a dataset with its hub copy (export-hf)."""
-    plan = plan_of(ds.info, {k: ds.view(k).index for k in KINDS})
-    write_bytes_atomic(root / "README.md", card_text(ds.info, plan, hub, license).encode("utf-8"))

@@ -1,4 +1,5 @@
-"""The fixed split schemes of docs/dataset.md, made once at build time, leak-checked, and stored.
+"""The fixed split schemes of docs/dataset.md, registered by name in SCHEMES and made once at
+build time (the build leak-checks them: splits/leaks.py).
 
 Every scheme sorts the samples by id and draws from a numpy Generator seeded from (seed, scheme
 name), so the same samples and seed give byte-identical split files whatever the input order.
@@ -11,13 +12,13 @@ import itertools
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from ..errors import VtsError
-from ..labels import STATES
-from .schema import SampleMeta, SplitFile, schema_errors
+from ...errors import VtsError
+from ...labels import STATES
+from ..format.records import PART_ORDER, SampleMeta, SplitFile
+from .leaks import BAND, OUTSIDE, UNKNOWN, location_keys
 
 SCHEMES = ("unseen_objects", "seen", "object_folds", "static_sessions", "static_locations")
 #: Held-out contact bands of static_locations: fractions of the frame width along x.
@@ -27,8 +28,6 @@ TEST_FRACTION = 0.2
 MAX_ASSIGNMENTS = 20000
 #: Random draws of the held-out objects of unseen_objects, to find one that has every state.
 HELD_OUT_DRAWS = 64
-PART_ORDER = ("train", "val", "test")
-BAND, OUTSIDE, UNKNOWN = "held-out band", "outside the band", "unknown"
 
 
 @dataclass
@@ -326,14 +325,6 @@ def object_folds_split(samples: Iterable[SampleMeta], *, seed: int = 0,
     return SplitFile(name, "slip", desc, seed, parts, ["object"], params)
 
 
-def location_key(s: SampleMeta, bands_px: Sequence[Sequence[float]]) -> str:
-    """Whether a sample's contact x lies in a held-out band [lo, hi) px, outside, or is unknown."""
-    x = s.contact_x_px
-    if x is None or not math.isfinite(x):
-        return UNKNOWN
-    return BAND if any(lo <= x < hi for lo, hi in bands_px) else OUTSIDE
-
-
 def static_locations_split(samples: Iterable[SampleMeta], *, seed: int = 0,
                            val_fraction: float = 0.1, resolution: tuple[int, int] | None = None,
                            bands: Sequence[tuple[float, float]] = DEFAULT_BANDS) -> SplitFile:
@@ -349,8 +340,10 @@ def static_locations_split(samples: Iterable[SampleMeta], *, seed: int = 0,
     width = int(resolution[1])
     bands_px = [[lo * width, hi * width] for lo, hi in bands]
     by_key: dict[str, list[str]] = {BAND: [], OUTSIDE: [], UNKNOWN: []}
-    for s in static:
-        by_key[location_key(s, bands_px)].append(s.sample_id)
+    xs = np.array([np.nan if s.contact_x_px is None else s.contact_x_px for s in static],
+                  np.float64)
+    for s, key in zip(static, location_keys(xs, bands_px), strict=True):
+        by_key[key].append(s.sample_id)
     if not by_key[BAND]:
         raise VtsError(f"{name}: no static sample has its contact x in the held-out band(s) "
                        f"{[list(b) for b in bands]} of the frame width")
@@ -366,113 +359,3 @@ def static_locations_split(samples: Iterable[SampleMeta], *, seed: int = 0,
     return SplitFile(name, "static", desc, seed, _parts(train=train, val=val, test=by_key[BAND]),
                      ["location:test"], params)
 
-
-def _part_rank(part: str) -> tuple[int, int]:
-    if part in PART_ORDER:
-        return (PART_ORDER.index(part), 0)
-    digits = part[4:] if part.startswith("fold") else ""
-    return (len(PART_ORDER), int(digits) if digits.isdigit() else 0)
-
-
-def leak_check(split: SplitFile, samples: Iterable[SampleMeta]) -> list[str]:
-    """Every violation of the split's disjoint rules across parts, plus ids repeated, unknown,
-    or of the wrong kind; an empty list when the split is clean."""
-    by_id = {s.sample_id: s for s in samples}
-    name, out = split.name, []
-    order = sorted(split.parts, key=_part_rank)
-    owner: dict[str, str] = {}
-    for part in order:
-        for sid in split.parts[part]:
-            if sid in owner:
-                where = "twice in" if owner[sid] == part else f"in both {owner[sid]} and"
-                out.append(f"{name}: sample {sid!r} {where} {part}")
-                continue
-            owner[sid] = part
-            s = by_id.get(sid)
-            if s is None:
-                out.append(f"{name}: sample {sid!r} in {part} is not in the dataset")
-            elif s.kind != split.kind:
-                out.append(f"{name}: sample {sid!r} in {part} is a {s.kind} sample in a "
-                           f"{split.kind} split")
-    for rule in split.disjoint:
-        out += _rule_violations(split, rule, order, by_id)
-    return out
-
-
-def _rule_violations(split: SplitFile, rule: str, order: list[str],
-                     by_id: dict[str, SampleMeta]) -> list[str]:
-    """The values of one disjoint rule's key shared by two parts it keeps apart."""
-    key, _, held = rule.partition(":")
-    name = split.name
-    if key == "location":
-        loc = split.params.get("location")
-        if not isinstance(loc, dict) or "bands_px" not in loc:
-            return [f"{name}: rule {rule!r} needs params.location.bands_px"]
-        bands = loc["bands_px"]
-        key_of: Callable[[SampleMeta], str] = lambda s: location_key(s, bands)  # noqa: E731
-    elif key in ("object", "session"):
-        key_of = lambda s: getattr(s, key)  # noqa: E731
-    else:
-        return [f"{name}: unknown disjoint key {key!r}"]
-    if held and held not in split.parts:
-        return [f"{name}: rule {rule!r} names a part the split does not have"]
-    values = {p: {key_of(by_id[i]) for i in split.parts[p] if i in by_id} for p in order}
-    out = []
-    for a, b in itertools.combinations(order, 2):
-        if held and held not in (a, b):
-            continue
-        out += [f"{name}: {key} {v!r} in both {a} and {b}" for v in sorted(values[a] & values[b])]
-    return out
-
-
-def write_splits(folder: str | Path, splits: Iterable[SplitFile]) -> dict[str, str]:
-    """Write each split to folder/<name>.json (canonical bytes); returns {name: sha256}."""
-    from ..atomic import write_bytes_atomic
-
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    out: dict[str, str] = {}
-    for sp in splits:
-        if sp.name in out:
-            raise ValueError(f"two splits named {sp.name!r}")
-        errs = schema_errors(sp.to_dict(), "split")
-        if errs:
-            raise ValueError(f"refusing to write an invalid split {sp.name!r}: {errs[0]}")
-        write_bytes_atomic(folder / f"{sp.name}.json", sp.to_bytes())
-        out[sp.name] = sp.sha256()
-    return out
-
-
-def read_split(path: str | Path, expected_sha256: str | None = None, *,
-               max_bytes: int = 256 << 20, max_ids: int | None = None) -> SplitFile:
-    """Read and validate a split file; a checksum other than expected_sha256 is an error, and
-    so is a file over max_bytes or listing more than max_ids ids (`validate.split_limits`: a
-    split lists each sample of its dataset at most once), refused before any id is looked at."""
-    import os
-
-    from ..jsonio import loads, read_bytes, regular_file
-
-    path = Path(path)
-    if not os.path.lexists(path):
-        raise VtsError("split file not found", path)
-    size = regular_file(path, "split file").stat().st_size
-    if size > max_bytes:
-        raise VtsError(f"split file of {size} bytes, more than a split of this dataset can hold "
-                       f"({max_bytes} bytes)", path)
-    data = read_bytes(path, "split file", max_bytes)
-    got = hashlib.sha256(data).hexdigest()
-    if expected_sha256 is not None and got != expected_sha256:
-        raise VtsError(f"sha256 mismatch: expected {expected_sha256}, found {got} "
-                       "(the split file was changed after the build)", path)
-    doc = loads(data, path)
-    parts = doc.get("parts") if isinstance(doc, dict) else None
-    if max_ids is not None and isinstance(parts, dict):
-        n = sum(len(v) for v in parts.values() if isinstance(v, list))
-        if n > max_ids:
-            raise VtsError(f"lists {n} sample ids, more than the {max_ids} samples of the "
-                           "dataset (a split lists each sample at most once)", path)
-    errs = schema_errors(doc, "split")
-    if errs:
-        more = f" (and {len(errs) - 1} more)" if len(errs) > 1 else ""
-        raise VtsError(f"{errs[0][:200]}{more}", path)
-    return SplitFile.from_dict(doc)

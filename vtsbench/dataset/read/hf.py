@@ -16,12 +16,12 @@ from typing import TYPE_CHECKING, Any
 
 import datasets
 
+from ..format.layout import DECODED_DTYPES
 from .arrays import ITER_BYTES
 
 if TYPE_CHECKING:
-    from .loader import View
+    from .view import View
 
-_DTYPES = {"rgb": "uint8", "depth": "float32", "contact": "bool"}
 _ARRAY_FEATURES = {2: datasets.Array2D, 3: datasets.Array3D, 4: datasets.Array4D,
                    5: datasets.Array5D}
 
@@ -34,7 +34,7 @@ def features(view: View, arrays: Sequence[str] | None = None) -> datasets.Featur
     shapes = view.dataset.info.shapes[view.kind]
     for name in arrays:
         shape = tuple(shapes[name][1:])
-        feats[name] = _ARRAY_FEATURES[len(shape)](shape=shape, dtype=_DTYPES[name])
+        feats[name] = _ARRAY_FEATURES[len(shape)](shape=shape, dtype=DECODED_DTYPES[name])
     return feats
 
 

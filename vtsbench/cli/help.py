@@ -1,0 +1,66 @@
+"""`--help` that wraps to the terminal and never cuts: typer's rich help ellipsises a word
+longer than its column (a path, an option's example) and keeps the docstrings' line breaks,
+which break mid-sentence at any width but the source's. Two small adjustments of typer's
+rich_utils (typer 0.2x), applied once when the command line is built."""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+
+
+def install() -> None:
+    """Fold long words onto the next line instead of ending them with an ellipsis, and join a
+    paragraph's lines so that the text wraps to the terminal's width."""
+    try:
+        from rich.columns import Columns
+        from rich.table import Table
+        from rich.text import Text
+        from typer import rich_utils
+    except ImportError:  # typer without rich: click's own help, which wraps and never cuts
+        return
+    if getattr(rich_utils, "_vtsbench_help", False):
+        return
+
+    class FoldTable(Table):
+        """A table whose columns fold long words (rich's default is an ellipsis)."""
+
+        def add_row(self, *renderables: Any, **kw: Any) -> None:
+            while len(self.columns) < len(renderables):
+                self.add_column(overflow="fold")
+            for c in self.columns:
+                c.overflow = "fold"
+            for c, r in zip(self.columns, renderables, strict=False):  # names are never cut
+                plain = getattr(r, "plain", r if isinstance(r, str) else "")
+                if plain.startswith("-"):
+                    c.min_width = max(c.min_width or 0, *(len(w) for w in plain.split()))
+            super().add_row(*renderables, **kw)
+
+    def fix_linebreaks(paragraphs: list[str], markup_mode: Any) -> str:
+        return "\n\n".join(p if p.startswith("\b") else re.sub(r"\s*\n\s*", " ", p)
+                           for p in paragraphs)
+
+    def columns(items: list[Any], *args: Any, **kw: Any) -> Any:
+        """An option's help, default and 'required' as one folding text (rich's Columns lays
+        them out in a grid that ellipsises a long word)."""
+        if not all(isinstance(i, Text) for i in items):
+            return Columns(items, *args, **kw)
+        out = Text(overflow="fold")
+        for k, item in enumerate(items):
+            if k:
+                out.append(" ")
+            out.append_text(item)
+        return out
+
+    make_command_help = rich_utils._make_command_help
+
+    def command_help(*, help_text: str, markup_mode: Any) -> Any:
+        """A command's line in its group's list: its first paragraph joined, as above."""
+        return make_command_help(help_text=fix_linebreaks(help_text.split("\n\n"), markup_mode),
+                                 markup_mode=markup_mode)
+
+    rich_utils._make_command_help = command_help  # type: ignore[assignment]
+    rich_utils.Columns = columns  # type: ignore[assignment]
+    rich_utils.Table = FoldTable  # type: ignore[misc]
+    rich_utils._fix_linebreaks = fix_linebreaks  # type: ignore[assignment]
+    rich_utils._vtsbench_help = True  # type: ignore[attr-defined]

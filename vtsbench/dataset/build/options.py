@@ -1,0 +1,65 @@
+"""The parameters of `vtsbench build` and their checks (one-line errors before any work)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from ...errors import VtsError
+
+SOLVERS = ("dct", "dst", "masked")
+
+
+@dataclass(frozen=True)
+class BuildOptions:
+    """The parameters of `vtsbench build` (docs/dataset.md, Building)."""
+
+    calibration: Path | None = None
+    solver: str = "dct"
+    depth: bool = True  # False: --no-depth, rgb arrays only and no calibration
+    frames: int = 8
+    workers: int = 1
+    scheduler: str | None = None
+    skip_bad: bool = False
+    overwrite: bool = False
+    version: str = "1.0.0"
+    compression_level: int = 3
+    seed: int = 0
+    shard_mb: float = 32.0
+    progress: bool = False
+    #: --holdout-objects: a file of object names, one a line (split scheme given_objects).
+    holdout_objects: Path | None = None
+    #: --split-file: split schemes in schemas/split.schema.json given by the user.
+    split_files: tuple[Path, ...] = ()
+
+
+def check_options(opts: BuildOptions) -> None:
+    """Every parameter in its range (vtsbench/limits.py), as one line naming the option."""
+    from ... import limits as lim
+    from ...limits import check_range, check_text
+
+    check_range("--frames", opts.frames, 1, lim.MAX_FRAMES)
+    check_range("--workers", opts.workers, 1, lim.MAX_WORKERS)
+    if opts.solver not in SOLVERS:
+        raise VtsError(f"--solver must be one of {', '.join(SOLVERS)}, got {opts.solver!r}")
+    if not opts.depth and opts.calibration is not None:
+        raise VtsError("--calibration makes the depth; a build with --no-depth takes none")
+    if not 0 <= opts.compression_level <= 22:
+        raise VtsError(f"--compression-level must be 0 (none) to 22, got "
+                       f"{opts.compression_level}")
+    if not opts.shard_mb > 0:
+        raise VtsError(f"--shard-mb must be positive, got {opts.shard_mb}")
+    check_range("--shard-mb", opts.shard_mb, lim.MIN_SHARD_MB, lim.MAX_SHARD_MB)
+    check_range("--seed", opts.seed, 0, lim.MAX_SEED)
+    check_text("--scheduler", opts.scheduler, lim.MAX_PATH_TEXT)
+    check_text("--dataset-version", opts.version, lim.MAX_VERSION)
+    if not _semver(opts.version):
+        raise VtsError(f"--dataset-version must be a semantic version such as 1.0.0, got "
+                       f"{opts.version!r}")
+
+
+def _semver(text: str) -> bool:
+    import re
+
+    return re.fullmatch(r"(0|[1-9]\d*)\.(0|[1-9]\d*)\.(0|[1-9]\d*)(-[0-9A-Za-z.-]+)?"
+                        r"(\+[0-9A-Za-z.-]+)?", text) is not None
