@@ -40,16 +40,12 @@ def fake_dataset(root: Path) -> Path:
     empty index/static.parquet; loads with `vtsbench.load`."""
     import pyarrow as pa
     import pyarrow.parquet as pq
-
-    from vtsbench.dataset.schema import (
-        Counts,
-        DatasetInfo,
-        SplitFile,
-        ZarrSettings,
-        index_schema,
-    )
-    from vtsbench.dataset.splits import write_splits
     from vtsbench.dataset.validate import kind_counts
+
+    from vtsbench.dataset.format.index import index_schema
+    from vtsbench.dataset.format.info import Counts, DatasetInfo, ZarrSettings
+    from vtsbench.dataset.format.records import SplitFile
+    from vtsbench.dataset.splits import write_splits
 
     rng = np.random.default_rng(0)
     ds = root / "dataset"

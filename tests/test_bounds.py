@@ -97,7 +97,7 @@ def test_simulate_help_states_the_bounds() -> None:
 
 
 def test_build_shard_mb_out_of_range(tmp_path: Path) -> None:
-    from vtsbench.dataset.options import BuildOptions, check_options
+    from vtsbench.dataset.build.options import BuildOptions, check_options
 
     clean(run("build", tmp_path, tmp_path / "o", "--shard-mb", "1e300"), 2, "--shard-mb")
     with pytest.raises(VtsError, match="--shard-mb"):
@@ -238,7 +238,7 @@ def test_click_usage_error_quoting_a_huge_value_is_bounded() -> None:
 
 def _submission(ds: Path, folder: Path, **meta: object) -> Path:
     """A complete, correct submission of seen/test with META in its metadata file."""
-    from vtsbench.dataset.schema import load_info
+    from vtsbench.dataset.format.info import load_info
     from vtsbench.evaluation.submission import load_truth
 
     t = load_truth(ds, "seen", "test")

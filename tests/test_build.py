@@ -48,10 +48,10 @@ def test_index_rows_match_zarr_rows_and_depth_is_aligned(built: Path, sim_record
                                                          ) -> None:
     import zarr
 
-    from vtsbench.dataset.index import read_index
-    from vtsbench.dataset.provenance import sha256_file
-    from vtsbench.dataset.shard import _calibration, depth_and_contact
-    from vtsbench.dataset.store import depth_to_int16
+    from vtsbench.dataset.build.shard import _calibration, depth_and_contact
+    from vtsbench.dataset.format.arrays import depth_to_int16
+    from vtsbench.dataset.format.index import read_metas as read_index
+    from vtsbench.dataset.format.provenance import sha256_file
     from vtsbench.recordings.media import read_frames
 
     cal_path = sim_recordings / "calibration.safetensors"

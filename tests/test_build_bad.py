@@ -11,8 +11,8 @@ from typer.testing import CliRunner
 
 from vtsbench.cli import app
 from vtsbench.dataset.build import BuildOptions, build
-from vtsbench.dataset.index import read_index
-from vtsbench.dataset.verify import verify
+from vtsbench.dataset.format.index import read_metas as read_index
+from vtsbench.dataset.tools.verify import verify
 from vtsbench.errors import VtsError
 
 pytest_plugins = ["test_build_helpers"]

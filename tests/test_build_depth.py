@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from vtsbench.dataset.depthmaps import CONTACT_PARAMS, DepthMaker
+from vtsbench.dataset.build.depthmaps import CONTACT_PARAMS, DepthMaker
 from vtsbench.depth.mask import clean_mask, disc
 
 pytest_plugins = ["test_build_helpers"]
@@ -108,7 +108,7 @@ def test_channel_sum_is_numpys_float32_sum() -> None:
     (r + g) + b, including magnitudes far apart, zeros and the colour limit's squares."""
     import cv2
 
-    from vtsbench.dataset.depthmaps import _ONES
+    from vtsbench.dataset.build.depthmaps import _ONES
 
     rng = np.random.default_rng(0)
     scale = 10.0 ** rng.integers(-6, 5, (256, 320, 3))

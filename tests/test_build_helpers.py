@@ -72,7 +72,7 @@ def built(sim_recordings: Path, tmp_path_factory: pytest.TempPathFactory) -> Pat
 def write_info_text(ds: Path, text: str) -> None:
     """Write meta/info.json as given (a document the dataclass cannot hold, such as a repeated
     key), its info_sha256, when it has one, recomputed to match."""
-    from vtsbench.dataset.schema import INFO_HASH, _with_info_hash
+    from vtsbench.dataset.format.info import INFO_HASH, _with_info_hash
 
     if f'"{INFO_HASH}": "' in text:
         text = _with_info_hash(text, hashlib.sha256(_with_info_hash(text, "").encode())
@@ -87,7 +87,7 @@ def rehash(ds: Path, edit=None) -> None:
     change the info.json document first."""
     import json
 
-    from vtsbench.dataset.schema import INFO_HASH, dataset_checksum
+    from vtsbench.dataset.format.info import INFO_HASH, dataset_checksum
 
     doc = json.loads((ds / "meta" / "info.json").read_text())
     if edit is not None:
@@ -109,7 +109,7 @@ def rewrite_index(ds: Path, kind: str, change) -> None:
     """Rewrite index/<kind>.parquet with change(table) -> table, then rehash."""
     import pyarrow.parquet as pq
 
-    from vtsbench.dataset.index import PARQUET_OPTIONS
+    from vtsbench.dataset.format.index import PARQUET_OPTIONS
 
     path = ds / "index" / f"{kind}.parquet"
     pq.write_table(change(pq.read_table(path)), path, **PARQUET_OPTIONS)

@@ -111,8 +111,8 @@ def test_unknown_scale_and_no_labels(sim_recordings: Path, tmp_path: Path) -> No
     sample = ds.slip[0]
     assert sample["mm_per_px"] is None and sample["state"] is None
     # what the loader gives fits the sample schema and its typed mirror
-    from vtsbench.dataset.schema import Sample as SampleSpec
-    from vtsbench.dataset.schema import SampleMeta, schema_errors
+    from vtsbench.dataset.format.records import Sample as SampleSpec
+    from vtsbench.dataset.format.records import SampleMeta, schema_errors
 
     for kind in ("static", "slip"):
         s = ds.view(kind)[0]

@@ -11,7 +11,8 @@ import pytest
 from typer.testing import CliRunner
 
 from vtsbench.cli import app
-from vtsbench.dataset.schema import SCHEMA_DIR, load_info
+from vtsbench.dataset.format.info import load_info
+from vtsbench.dataset.format.records import SCHEMA_DIR
 from vtsbench.evaluation import metrics as M
 from vtsbench.evaluation.leaderboard import entry_schema_errors
 from vtsbench.evaluation.submission import load_truth

@@ -13,7 +13,7 @@ from test_eval_cli import slip_split, write_submission
 from typer.testing import CliRunner
 
 from vtsbench.cli import app
-from vtsbench.dataset.schema import SCHEMA_DIR
+from vtsbench.dataset.format.records import SCHEMA_DIR
 from vtsbench.evaluation.magnitude import (
     MAGNITUDE_EDGES_MM,
     by_magnitude,

@@ -55,3 +55,21 @@ def test_a_split_missing_from_a_url_names_the_url(vts_dataset: Path) -> None:
     with pytest.raises(VtsError) as e:
         load_truth(url, "no-such-split")
     assert str(e.value).startswith(f"{url}: no split 'no-such-split'")
+
+
+def test_the_eval_command_scores_a_file_url(vts_dataset: Path, tmp_path: Path) -> None:
+    """`vtsbench eval --dataset file://...` keeps the URL as given (a Path would make it file:/x)."""
+    from typer.testing import CliRunner
+
+    from vtsbench.cli import app
+
+    split, part = slip_split(vts_dataset)
+    sub = write_submission(vts_dataset, tmp_path / "sub", split, part, wrong=1)
+    runner = CliRunner()
+    for name, where in (("url", vts_dataset.as_uri()), ("folder", str(vts_dataset))):
+        res = runner.invoke(app, ["eval", str(sub), "--dataset", where, "--split", split,
+                                  "--part", part, "--out", str(tmp_path / name),
+                                  "--no-figures"])
+        assert res.exit_code == 0, res.output
+    assert (tmp_path / "url" / "metrics.json").read_bytes() == \
+        (tmp_path / "folder" / "metrics.json").read_bytes()

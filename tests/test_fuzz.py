@@ -304,7 +304,7 @@ def test_fuzz_damaged_datasets(built: Path, tmp_path: Path,
     and neither ever raises anything but a one-line VtsError."""
     from test_build_helpers import use_dataset
 
-    from vtsbench.dataset.verify import verify
+    from vtsbench.dataset.tools.verify import verify
     from vtsbench.errors import VtsError
 
     rng = random.Random(21)

@@ -15,7 +15,7 @@ def test_given_objects_through_train_predict_eval(vts_dataset: Path, tmp_path: P
     from typer.testing import CliRunner
 
     from vtsbench.cli import app
-    from vtsbench.dataset.loader import load
+    from vtsbench.dataset.read.loader import load
 
     rec = vts_dataset.parent / "recordings"
     objects = sorted(set(load(vts_dataset).slip.index.column("object").to_pylist()))

@@ -47,7 +47,7 @@ def test_changed_info_json_fails_verify_and_load(ds: Path, old: str, new: str) -
 
 
 def test_every_flipped_bit_of_info_json_is_caught(ds: Path) -> None:
-    from vtsbench.dataset.schema import load_info
+    from vtsbench.dataset.format.info import load_info
 
     p = ds / "meta" / "info.json"
     orig = p.read_bytes()
@@ -65,7 +65,7 @@ def test_every_flipped_bit_of_info_json_is_caught(ds: Path) -> None:
 def test_metadata_contradicting_arrays_refused_by_the_loader(ds: Path) -> None:
     """Even with a recomputed info_sha256, a depth scale the arrays do not have is refused."""
     import vtsbench
-    from vtsbench.dataset.schema import DatasetInfo, load_info
+    from vtsbench.dataset.format.info import DatasetInfo, load_info
 
     info = load_info(ds)
     doc = info.to_dict()
@@ -79,7 +79,7 @@ def test_format_1_0_info_without_its_hash_still_loads(ds: Path) -> None:
     """A genuine 1.0 dataset: its depth arrays carry the `scale` attribute 1.0 wrote."""
     from test_build_helpers import depth_attrs_to_1_0
 
-    from vtsbench.dataset.schema import load_info
+    from vtsbench.dataset.format.info import load_info
 
     depth_attrs_to_1_0(ds)
     info = load_info(ds)
@@ -147,7 +147,7 @@ def test_calibration_with_nan_coefficients_is_refused(rec: Path, tmp_path: Path)
 def test_a_build_whose_output_lock_is_held_is_refused(rec: Path, tmp_path: Path) -> None:
     import fcntl
 
-    from vtsbench.dataset.staging import lock_path
+    from vtsbench.dataset.build.staging import lock_path
 
     out = tmp_path / "out"
     with open(lock_path(out), "a+b") as fh:
@@ -421,7 +421,7 @@ def test_kill_9_of_a_build_leaves_no_worker(rec: Path, tmp_path: Path) -> None:
 
 
 def test_every_flipped_byte_of_zarr_json_is_a_verify_problem(ds: Path) -> None:
-    from vtsbench.dataset.verify import verify
+    from vtsbench.dataset.tools.verify import verify
 
     p = ds / "data" / "slip.zarr" / "zarr.json"
     orig = p.read_bytes()
@@ -609,4 +609,4 @@ def test_the_wheel_holds_vtsbench_only_and_declares_its_imports() -> None:
     deps = " ".join(doc["project"]["dependencies"])
     assert "google-crc32c" in deps and "isal" not in deps
     for ep in doc["project"]["entry-points"]["vtsbench.recipes"].values():
-        assert ep.startswith("vtsbench.recipes_builtin.")
+        assert ep.startswith("vtsbench.recipes.builtin.")

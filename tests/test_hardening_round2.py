@@ -26,7 +26,7 @@ pytest_plugins = ["test_build_helpers"]
 def _submission(ds: Path, folder: Path, split: str = "unseen_objects", part: str = "test",
                 prefix: str = "") -> Path:
     """Predictions equal to the truth (ids with `prefix` prepended), with their metadata."""
-    from vtsbench.dataset.schema import load_info
+    from vtsbench.dataset.format.info import load_info
     from vtsbench.evaluation.submission import load_truth
 
     t, info = load_truth(ds, split, part), load_info(ds / "meta" / "info.json")
@@ -158,7 +158,7 @@ def odd_files(tmp_path: Path) -> dict[str, tuple[Path, str]]:
 
 @pytest.mark.parametrize("kind", ["folder", "fifo", "device", "missing"])
 def test_split_file_and_object_list_reasons(odd_files, kind: str) -> None:
-    from vtsbench.dataset.given_splits import read_object_list, read_split_file
+    from vtsbench.dataset.splits.given import read_object_list, read_split_file
 
     path, reason = odd_files[kind]
     for read in (read_object_list, read_split_file):
@@ -314,7 +314,7 @@ def test_push_checks_the_repository_id_first(tmp_path: Path, repo: str) -> None:
 
 
 def test_push_accepts_hub_repository_ids() -> None:
-    from vtsbench.dataset.push import check_repo_id
+    from vtsbench.dataset.tools.push import check_repo_id
 
     for repo in ("me/tactile", "my-lab/tactile_v1.2", "A/" + "x" * 96, "u/x"):
         assert check_repo_id(repo) == repo

@@ -13,8 +13,8 @@ from typer.testing import CliRunner
 
 import vtsbench
 from vtsbench.cli import app
-from vtsbench.dataset.hub import HUB_DIR, config_name, split_name
-from vtsbench.dataset.verify import verify
+from vtsbench.dataset.tools.hub_layout import HUB_DIR, config_name, split_name
+from vtsbench.dataset.tools.verify import verify
 from vtsbench.labels import DIRECTION_NAMES, STATES
 
 pytest_plugins = ["loader_conftest"]
@@ -159,7 +159,7 @@ def test_rgb_only_dataset_exports(tmp_path: Path, offline: None) -> None:
     from loader_conftest import SIZE
 
     from vtsbench.dataset.build import BuildOptions, build
-    from vtsbench.dataset.hub import export_hf
+    from vtsbench.dataset.tools.hub import export_hf
     from vtsbench.sim.simulate import simulate
 
     simulate(tmp_path / "rec", seed=1, n_static=4, n_sequences=4, n_presses=0, size=SIZE,

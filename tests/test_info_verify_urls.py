@@ -10,8 +10,8 @@ import pytest
 from typer.testing import CliRunner
 
 from vtsbench.cli import app
-from vtsbench.dataset.summary import summarise
-from vtsbench.dataset.verify import verify
+from vtsbench.dataset.tools.info import summarise
+from vtsbench.dataset.tools.verify import verify
 
 pytest_plugins = ["loader_conftest"]
 

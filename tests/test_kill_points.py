@@ -26,9 +26,9 @@ from vtsbench import atomic
 from vtsbench.dataset.build import BuildOptions, build, staging
 from vtsbench.dataset.build import finish as finish_mod
 from vtsbench.dataset.build import pipeline as build_mod
-from vtsbench.dataset.schema import load_info
+from vtsbench.dataset.format.info import load_info
 from vtsbench.dataset.tools import hub
-from vtsbench.dataset.verify import verify
+from vtsbench.dataset.tools.verify import verify
 from vtsbench.errors import VtsError
 
 MODES = ("exchange", "two renames")

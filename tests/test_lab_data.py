@@ -13,13 +13,9 @@ from tests.conftest import real_dir
 from tests.test_calibration_data import copy_folder, digit_recordings, replace, sim_folder
 from tests.test_splits import synth
 from vtsbench.cli import app
-from vtsbench.dataset.given_splits import (
-    given_objects_split,
-    read_object_list,
-    read_split_file,
-)
-from vtsbench.dataset.schema import extra_column_name, index_schema_of
+from vtsbench.dataset.format.index import extra_column_name, index_schema_of
 from vtsbench.dataset.splits import leak_check
+from vtsbench.dataset.splits.given import given_objects_split, read_object_list, read_split_file
 from vtsbench.depth.calibration import calibrate
 from vtsbench.depth.sphere import circle_doubts, detect_circle
 from vtsbench.errors import VtsError
@@ -211,7 +207,7 @@ def test_build_keeps_fields_and_takes_given_splits(tmp_path) -> None:
     import pyarrow.parquet as pq
 
     from tests.conftest import write_video
-    from vtsbench.dataset.loader import load
+    from vtsbench.dataset.read.loader import load
 
     src = tmp_path / "src"
     for split in ("train", "test"):

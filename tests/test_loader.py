@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 import vtsbench
-from vtsbench.dataset.loader import SampleIndexError, View
+from vtsbench.dataset.format.records import schema_errors
 from vtsbench.dataset.read import loader
-from vtsbench.dataset.schema import schema_errors
+from vtsbench.dataset.read.view import SampleIndexError, View
 from vtsbench.errors import VtsError
 
 pytest_plugins = ["loader_conftest"]

@@ -91,7 +91,7 @@ def test_format_1_0_datasets_still_load(dataset_copy: Path) -> None:
 
     from test_build_helpers import depth_attrs_to_1_0
 
-    from vtsbench.dataset.verify import verify
+    from vtsbench.dataset.tools.verify import verify
 
     depth_attrs_to_1_0(dataset_copy)
     info = dataset_copy / "meta" / "info.json"

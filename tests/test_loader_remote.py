@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import vtsbench
-from vtsbench.dataset.loader import VtsDataset
+from vtsbench.dataset.read.loader import VtsDataset
 from vtsbench.errors import VtsError
 
 pytest_plugins = ["loader_conftest"]

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 import vtsbench
-from vtsbench.dataset.loader import VtsDataset
+from vtsbench.dataset.read.loader import VtsDataset
 from vtsbench.errors import VtsError
 
 torch = pytest.importorskip("torch")
 from torch.utils.data import DataLoader  # noqa: E402
 
-from vtsbench.dataset.torch_dataset import frame_numbers  # noqa: E402
+from vtsbench.dataset.read.torch_dataset import frame_numbers  # noqa: E402
 
 pytest_plugins = ["loader_conftest"]
 
@@ -146,7 +146,7 @@ def test_joint_transforms_keep_rgb_depth_contact_aligned(vts_dataset: Path) -> N
     """A flip through `transforms` moves the input and the spatial targets together."""
     from torchvision.transforms import v2
 
-    from vtsbench.dataset.torch_dataset import HorizontalFlip
+    from vtsbench.dataset.read.torch_dataset import HorizontalFlip
     from vtsbench.labels import MIRROR_X
 
     ds = vtsbench.load(vts_dataset)

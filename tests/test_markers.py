@@ -195,8 +195,8 @@ def test_build_depth_of_a_marker_gel_is_the_calibrations(folders) -> None:
     Calibration.gradients does; on a plain gel it still takes none of it."""
     import dataclasses
 
-    from vtsbench.dataset.depthmaps import DepthMaker
-    from vtsbench.dataset.shard import depth_and_contact
+    from vtsbench.dataset.build.depthmaps import DepthMaker
+    from vtsbench.dataset.build.shard import depth_and_contact
     from vtsbench.depth.poisson import integrate
 
     plain_folder, marked, layer = folders

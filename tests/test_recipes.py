@@ -94,7 +94,7 @@ def test_builtin_name_and_pyproject_entry() -> None:
     assert load_recipe("flow").name == "flow"
     text = (ROOT / "pyproject.toml").read_text()
     assert '[project.entry-points."vtsbench.recipes"]' in text
-    assert 'flow = "vtsbench.recipes_builtin.flow:RECIPE"' in text
+    assert 'flow = "vtsbench.recipes.builtin.flow:RECIPE"' in text
     assert 'include = ["vtsbench*"]' in text
 
 

@@ -27,8 +27,8 @@ from typer.testing import CliRunner
 
 import vtsbench
 from vtsbench.cli import app
-from vtsbench.dataset.location import Location, safe_rel
-from vtsbench.dataset.schema import dataset_checksum
+from vtsbench.dataset.format.info import dataset_checksum
+from vtsbench.dataset.read.location import Location, safe_rel
 from vtsbench.errors import VtsError
 
 pytest_plugins = ["loader_conftest"]
@@ -181,8 +181,8 @@ def test_the_remote_copy_itself_refuses_a_path_leaving_it(served: Path, tmp_path
     dataset joins no listed path outside its temporary folder."""
     import dataclasses
 
+    from vtsbench.dataset.format.info import load_info
     from vtsbench.dataset.read import remote
-    from vtsbench.dataset.schema import load_info
 
     scratch = tmp_path / "scratch"
     scratch.mkdir()
@@ -200,10 +200,11 @@ def test_the_remote_copy_itself_refuses_a_path_leaving_it(served: Path, tmp_path
     assert not list(scratch.iterdir())
 
 
-def test_location_names_the_same_info_json_as_the_schema() -> None:
-    from vtsbench.dataset import location, schema
+def test_location_reads_the_info_json_the_layout_names() -> None:
+    from vtsbench.dataset.format import layout
+    from vtsbench.dataset.read import location
 
-    assert location.INFO_PATH == schema.INFO_PATH
+    assert location.INFO_PATH is layout.INFO_PATH
 
 
 def test_load_refuses_a_split_file_path_leaving_the_dataset(served: Path) -> None:
@@ -251,7 +252,9 @@ def test_a_server_with_ranges_is_read_in_ranges(served: Path) -> None:
 
     with serve(served.parent) as base:
         ds = vtsbench.load(f"{base}/ds")
-        fs_cls = __import__("vtsbench.dataset.location", fromlist=["x"]).http_filesystem_class()
+        from vtsbench.dataset.read.location import http_filesystem_class
+
+        fs_cls = http_filesystem_class()
         ds.slip.read([0], ("rgb",))
         fs = ds._kinds["slip"]._group.store._store.fs
         assert isinstance(fs, fs_cls) and not fs.no_ranges

@@ -10,7 +10,7 @@ from collections import Counter
 import pytest
 
 from vtsbench.dataset import splits as sp
-from vtsbench.dataset.schema import SampleMeta, SplitFile, schema_errors
+from vtsbench.dataset.format.records import SampleMeta, SplitFile, schema_errors
 from vtsbench.errors import VtsError
 from vtsbench.labels import STATES
 

@@ -13,7 +13,7 @@ from conftest import real_dir
 from typer.testing import CliRunner
 
 from vtsbench.cli import app
-from vtsbench.dataset.schema import SCHEMA_DIR
+from vtsbench.dataset.format.records import SCHEMA_DIR
 from vtsbench.recordings.manifest import Entry, Manifest, Session, Source, save_manifest
 from vtsbench.recordings.media import write_png
 from vtsbench.stats.window import step_statistics, window_stats

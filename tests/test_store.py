@@ -8,20 +8,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vtsbench.dataset.store import (
-    ARRAYS,
-    DEPTH_MAX_MM,
-    DTYPES,
-    Layout,
-    depth_to_int16,
-    depth_to_mm,
+from vtsbench.dataset.build.store import (
     encode_shard,
     encode_shard_zarr,
-    open_group,
     samples_per_shard,
     write_metadata,
     write_shard,
 )
+from vtsbench.dataset.format.arrays import DEPTH_MAX_MM, Layout, depth_to_int16, depth_to_mm
+from vtsbench.dataset.format.layout import ARRAYS
+from vtsbench.dataset.format.layout import STORED_DTYPES as DTYPES
+from vtsbench.dataset.read.store import open_group
 from vtsbench.errors import VtsError
 
 

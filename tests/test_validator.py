@@ -18,7 +18,7 @@ from typer.testing import CliRunner
 
 import vtsbench
 from vtsbench.cli import app
-from vtsbench.dataset.verify import verify
+from vtsbench.dataset.tools.verify import verify
 from vtsbench.errors import VtsError
 
 pytest_plugins = ["test_build_helpers"]

@@ -10,9 +10,9 @@ import pytest
 from typer.testing import CliRunner
 
 from vtsbench.cli import app
-from vtsbench.dataset.index import read_index
-from vtsbench.dataset.store import Layout
-from vtsbench.dataset.verify import chunk_of_byte, shard_index, verify
+from vtsbench.dataset.format.arrays import Layout
+from vtsbench.dataset.format.index import read_metas as read_index
+from vtsbench.dataset.tools.verify import chunk_of_byte, shard_index, verify
 
 pytest_plugins = ["test_build_helpers"]
 

@@ -121,7 +121,7 @@ def print_build(res) -> None:
     from rich.markup import escape
     from rich.table import Table
 
-    from ..dataset.summary import human
+    from ..dataset.tools.info import human
 
     con = console()
     for w in res.warnings:
@@ -151,7 +151,7 @@ def info(
     """Summarise a dataset: samples per object, state, direction and split part; sizes on disk;
     versions and checksum."""
 
-    from ..dataset.summary import render, summarise
+    from ..dataset.tools.info import render, summarise
 
     render(run(summarise, dataset), console())
 
@@ -169,7 +169,7 @@ def verify(
     """Check a dataset: every file's sha256, info.json and split schemas, index and array shapes,
     split leaks, and decode every chunk; exit 1 on any problem."""
 
-    from ..dataset.verify import verify as run_verify
+    from ..dataset.tools.verify import verify as run_verify
 
     report = run(run_verify, dataset, decode=not quick, progress=True)
     report_problems(report.problems, report.warnings,
@@ -194,8 +194,8 @@ def export_hf(
     Example: [bold]vtsbench export-hf data/ds --license cc-by-4.0[/]
     """
 
-    from ..dataset.hub import export_hf as run_export
-    from ..dataset.summary import human
+    from ..dataset.tools.hub import export_hf as run_export
+    from ..dataset.tools.info import human
 
     res = run(run_export, dataset, workers=workers, license=license, progress=not quiet)
     lay = res.layout
@@ -225,9 +225,9 @@ def push(
     [bold]vtsbench push data/ds my-lab/tactile --dry-run[/]
     """
 
-    from ..dataset.push import push as run_push
-    from ..dataset.push import push_plan
-    from ..dataset.summary import human
+    from ..dataset.tools.info import human
+    from ..dataset.tools.push import push as run_push
+    from ..dataset.tools.push import push_plan
 
     con = console()
     plan = run(push_plan, dataset, zarr, repo_id)

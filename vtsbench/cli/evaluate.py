@@ -17,7 +17,9 @@ ROOT = Annotated[Path, typer.Option("--root", help="Leaderboards folder.")]
 
 def eval_(
     submission: Annotated[Path, typer.Argument(help="Predictions: CSV or parquet.")],
-    dataset: Annotated[Path, typer.Option(help="Dataset folder (made by vtsbench build).")],
+    dataset: Annotated[str, str_option(limit=lim.MAX_PATH_TEXT, help=(
+        "Dataset folder (made by vtsbench build), or a URL as vtsbench.load takes "
+        "(file://, http(s)://, s3://...)."))],
     split: Annotated[str, str_option(limit=lim.MAX_SPLIT,
                                      help="Split scheme, e.g. unseen_objects or seen.")],
     part: Annotated[str, str_option(limit=lim.MAX_SPLIT,
@@ -65,7 +67,7 @@ def print_rows(title: str, head: tuple[str, ...], rows: list[tuple[str, ...]]) -
 
 def leaderboard_add(
     submission: Annotated[Path, typer.Argument(help="Predictions: CSV or parquet.")],
-    dataset: Annotated[Path, typer.Option(help="Dataset folder.")],
+    dataset: Annotated[str, str_option(limit=lim.MAX_PATH_TEXT, help="Dataset folder or URL.")],
     split: Annotated[str, str_option(limit=lim.MAX_SPLIT, help="Split scheme.")],
     part: Annotated[str, str_option(limit=lim.MAX_SPLIT, help="Part of the split.")] = "test",
     meta: Annotated[Path | None, typer.Option(help="Metadata JSON.")] = None,
@@ -93,7 +95,8 @@ def leaderboard_render(root: ROOT = Path("leaderboards")) -> None:
 
 
 def leaderboard_rescore(
-    dataset: Annotated[Path, typer.Option(help="The dataset the entries were scored on.")],
+    dataset: Annotated[str, str_option(limit=lim.MAX_PATH_TEXT, help=(
+        "The dataset the entries were scored on: folder or URL."))],
     root: ROOT = Path("leaderboards"),
     all_: Annotated[bool, typer.Option(
         "--all", help="Re-score entries of the current metric version too.")] = False,

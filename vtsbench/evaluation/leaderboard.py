@@ -25,7 +25,7 @@ from .submission import Submission, load_truth, open_dataset
 from .tasks import BOARDS, TASKS, Column, headline_column, kind_of, task_columns
 
 if TYPE_CHECKING:
-    from ..dataset.loader import VtsDataset
+    from ..dataset.read.loader import VtsDataset
 
 ENTRY_VERSION = 1
 #: The paper's figures (accuracy %), by split, shown as a reference row.
@@ -47,7 +47,7 @@ def entry_schema_errors(doc: Any) -> list[str]:
     """Violations of schemas/leaderboard_entry.schema.json (which refers to metrics.schema)."""
     from referencing import Registry, Resource
 
-    from ..dataset.schema import SCHEMA_DIR
+    from ..dataset.format.records import SCHEMA_DIR
 
     sch = json.loads((SCHEMA_DIR / "leaderboard_entry.schema.json").read_text())
     ms = json.loads((SCHEMA_DIR / "metrics.schema.json").read_text())

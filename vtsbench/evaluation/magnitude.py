@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from ..dataset.loader import VtsDataset
+    from ..dataset.read.loader import VtsDataset
 
 #: Bin edges in mm (half-open [lo, hi)); the simulator's slips run from 0.08 to 1.5 mm, the
 #: slip threshold is 0.05 mm.

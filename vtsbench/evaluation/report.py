@@ -25,7 +25,7 @@ from .submission import Submission, Truth, load_submission, load_truth, open_dat
 from .tasks import DIRECTION, SLIP, STATE, TASKS, Column, task_columns
 
 if TYPE_CHECKING:
-    from ..dataset.loader import VtsDataset
+    from ..dataset.read.loader import VtsDataset
 
 
 def score_run(truth: Truth, preds: dict[str, np.ndarray], seed: int = 0,

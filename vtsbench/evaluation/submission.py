@@ -24,7 +24,7 @@ from ..errors import VtsError, one_line
 from .tasks import SLIP, STATE, TASKS, tasks_of
 
 if TYPE_CHECKING:
-    from ..dataset.loader import VtsDataset
+    from ..dataset.read.loader import VtsDataset
 
 MAX_SHOWN = 3
 #: Characters of one offender shown (a 5 MB name is cut, with its length).
@@ -98,7 +98,7 @@ def load_truth(dataset: str | Path | VtsDataset, split: str, part: str = "test")
 
 def open_dataset(dataset: str | Path | VtsDataset) -> VtsDataset:
     """A dataset loaded by `vtsbench.load` from a folder or URL (a loaded one as it is)."""
-    from ..dataset.loader import VtsDataset, load
+    from ..dataset.read.loader import VtsDataset, load
 
     return dataset if isinstance(dataset, VtsDataset) else load(dataset)
 
@@ -210,9 +210,9 @@ def read_meta(path: Path) -> dict[str, Any]:
 
 def schema_errors(doc: Any, at: str) -> list[str]:
     """Violations of a $defs entry of schemas/submission.schema.json."""
-    from ..dataset import schema as ds
+    from ..dataset.format.records import SCHEMA_DIR
 
-    doc_schema = json.loads((ds.SCHEMA_DIR / "submission.schema.json").read_text())
+    doc_schema = json.loads((SCHEMA_DIR / "submission.schema.json").read_text())
 
     sch = {"$schema": doc_schema["$schema"], "$defs": doc_schema["$defs"],
            "$ref": f"#/$defs/{at}"}

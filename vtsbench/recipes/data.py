@@ -33,7 +33,7 @@ def fit_view(dataset_path: str | Path, split: str, parts: Sequence[str] = ("trai
     import numpy as np
 
     import vtsbench
-    from vtsbench.dataset.loader import View
+    from vtsbench.dataset.read.view import View
 
     if not parts:
         raise VtsError("fit_parts must name at least one part")
@@ -50,7 +50,7 @@ def fit_view(dataset_path: str | Path, split: str, parts: Sequence[str] = ("trai
 def per_read(view: Any, arrays: Sequence[str] | None = None) -> int:
     """How many samples of a view one batched read takes: about ITER_BYTES of decoded arrays
     (the named ones, default all), the budget of the loader's own iteration."""
-    from vtsbench.dataset.arrays import ITER_BYTES
+    from vtsbench.dataset.read.arrays import ITER_BYTES
 
     return max(1, ITER_BYTES // max(1, view.nbytes(arrays)))
 

@@ -18,7 +18,7 @@ def write_submission(rows: Iterable[dict[str, Any]], out: str | Path, *, method:
                      seeds: list[int] | None = None, extra: dict[str, Any] | None = None
                      ) -> tuple[Path, Path]:
     """Write rows as a submission CSV and its metadata (OUT.meta.json) beside it."""
-    from vtsbench.dataset.loader import load
+    from vtsbench.dataset.read.loader import load
     from vtsbench.evaluation.submission import default_meta_path
 
     rows = list(rows)

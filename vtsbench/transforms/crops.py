@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from vtsbench.dataset.arrays import check_arrays
-from vtsbench.dataset.torch_dataset import frame_numbers
+from vtsbench.dataset.read.arrays import check_arrays
+from vtsbench.dataset.read.torch_dataset import frame_numbers
 from vtsbench.transforms.cache import CachedItems
 from vtsbench.transforms.contact_crop import FLOW_SOFT_PX, contact_crop
 from vtsbench.transforms.modality import channels_of
