@@ -13,7 +13,7 @@ with a 95 % Wilson interval:
 - phase-correlation reference: `cv2.phaseCorrelate` of the whole first and last grey frames
   (no window), the angle binned to the 8 classes, as `benchmarks/results.py` scores it; the
   share of shifts under 0.5 px (the registration sees almost no motion) is shown beside it;
-- flow recipe: the direction rule of `vtsbench/recipes_builtin/flow.py` (`global_shift`: the
+- flow recipe: the direction rule of `vtsbench/recipes/builtin/flow.py` (`global_shift`: the
   first frame against the last inside the window where the gel moves; no training, the
   recipe's tree decides the state only).
 

@@ -195,16 +195,9 @@ def export_hf(
     """
 
     from ..dataset.tools.hub import export_hf as run_export
-    from ..dataset.tools.info import human
 
     res = run(run_export, dataset, workers=workers, license=license, progress=not quiet)
-    lay = res.layout
-    n = sum(f.rows for fs in lay.files.values() for f in fs)
-    files = sum(len(fs) for fs in lay.files.values())
-    console().print(
-        f"{n} samples in {files} parquet files ({human(lay.nbytes())}) in {res.seconds:.1f} s"
-        f"{f' ({res.kept} kept from an interrupted export)' if res.kept else ''}; "
-        f"configs: {', '.join(lay.configs)}")
+    console().print(res.summary())
 
 
 def push(
@@ -225,21 +218,18 @@ def push(
     [bold]vtsbench push data/ds my-lab/tactile --dry-run[/]
     """
 
-    from ..dataset.tools.info import human
     from ..dataset.tools.push import push as run_push
     from ..dataset.tools.push import push_plan
 
     con = console()
     plan = run(push_plan, dataset, zarr, repo_id)
     if not plan.has_hub_copy:
-        con.print("[yellow]warning[/] no hf/ folder: run `vtsbench export-hf` first for "
-                  "the Hub viewer and datasets.load_dataset configs", soft_wrap=True)
+        con.print(f"[yellow]warning[/] {plan.NO_HUB_COPY}", soft_wrap=True)
     if dry_run:
-        for rel, size in plan.files:
-            con.print(f"{human(size):>10}  {rel}", soft_wrap=True)
-        con.print(f"dry run: would upload {len(plan.files)} files ({human(plan.nbytes)}) "
-                  f"to datasets/{repo_id}" + (f"; leaving out {len(plan.left_out)} Zarr "
-                                              "files" if plan.left_out else ""))
+        *files, total = plan.listing(repo_id)
+        for line in files:
+            con.print(line, soft_wrap=True)
+        con.print(total)
         return
-    url = run(run_push, dataset, repo_id, zarr=zarr, private=private, revision=revision)
-    con.print(f"uploaded {len(plan.files)} files ({human(plan.nbytes)}): {url}")
+    con.print(plan.uploaded(run(run_push, dataset, repo_id, zarr=zarr, private=private,
+                                revision=revision)))

@@ -15,7 +15,7 @@ from typing import Any
 HEAD = """\
 # Command line reference
 
-Generated from the command line by `python -m vtsbench.cli_doc docs/cli.md`; a test fails when
+Generated from the command line by `python -m vtsbench.cli.doc docs/cli.md`; a test fails when
 this page is out of date. `vtsbench COMMAND -h` (or `--help`) shows the same, with examples.
 
 - `vtsbench --version` prints the installed version.

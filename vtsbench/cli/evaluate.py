@@ -77,11 +77,11 @@ def leaderboard_add(
     replace: Annotated[bool, typer.Option("--replace", hidden=True)] = False,
 ) -> None:
     """Score a submission and store it (predictions included) as a leaderboard entry."""
-    from ..evaluation.leaderboard import add, render
+    from ..evaluation.leaderboard import add_and_render
 
     replace = overwrite or deprecated(replace, "--replace", "--overwrite")
-    path = run(add, submission, dataset, split, part, root=root, meta=meta, replace=replace)
-    run(render, root)
+    path = run(add_and_render, submission, dataset, split, part, root=root, meta=meta,
+               replace=replace)
     typer.echo(f"added {path}; rendered {path.parent / 'leaderboard.md'}")
 
 
@@ -103,8 +103,8 @@ def leaderboard_rescore(
     force: Annotated[bool, typer.Option("--force", hidden=True)] = False,
 ) -> None:
     """Re-score stored entries whose metric version is not the current one, then re-render."""
-    from ..evaluation.leaderboard import render, rescore
+    from ..evaluation.leaderboard import rescore_and_render
 
-    changed = run(rescore, root, dataset, force=all_ or deprecated(force, "--force", "--all"))
-    run(render, root)
+    changed = run(rescore_and_render, root, dataset,
+                  force=all_ or deprecated(force, "--force", "--all"))
     typer.echo(f"re-scored {len(changed)} entr{'y' if len(changed) == 1 else 'ies'}")

@@ -36,7 +36,7 @@ def train(
     Example: [bold]vtsbench train flow --dataset data/ds --split unseen_objects --out
     runs/flow[/]
     """
-    from ..runs import train_run
+    from ..recipes.runs import train_run
 
     res = run(train_run, recipe, dataset, split, out, config=config, seed=seed, device=device,
               resume=resume, progress=not quiet)
@@ -66,7 +66,7 @@ def predict(
     Example: [bold]vtsbench predict flow runs/flow/checkpoint.safetensors --dataset
     data/ds --split unseen_objects --out flow.csv[/]
     """
-    from ..evaluation.submission_meta import predict_submission
+    from ..recipes.predict import predict_submission
 
     res = run(predict_submission, recipe, checkpoint, dataset, split, out, part=part,
               device=device, method=method, seed=seed)

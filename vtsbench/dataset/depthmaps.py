@@ -1,7 +1,7 @@
-"""Moved to vtsbench.dataset.build.depthmaps; re-exported here so that imports of the old path keep
+"""Moved to vtsbench.depth.depthmaps; re-exported here so that imports of the old path keep
 working."""
 
-from .build.depthmaps import _ONES, CONTACT_PARAMS, DepthMaker
+from ..depth.depthmaps import _ONES, CONTACT_PARAMS, DepthMaker
 
 __all__ = [
     "CONTACT_PARAMS",

@@ -100,7 +100,7 @@ def _numpy_depth(frames: np.ndarray, cal: Calibration, solver: str,
 
 def _maker(cal: Calibration) -> Any:
     """The calibration's DepthMaker, made once (its lookup tables and buffers)."""
-    from ..dataset.build.depthmaps import DepthMaker
+    from .depthmaps import DepthMaker
 
     key = (cal.mapping, cal.zero_map, cal.background, cal.mm_per_px, cal.blur_px,
            cal.colour_limit_dn)

@@ -269,3 +269,22 @@ def render(root: str | Path = "leaderboards") -> dict[Path, str]:
         write_text_atomic(folder / "leaderboard.md", text)
         out[folder / "leaderboard.md"] = text
     return out
+
+
+def add_and_render(submission: str | Path, dataset: str | Path | VtsDataset, split: str,
+                   part: str = "test", root: str | Path = "leaderboards",
+                   meta: str | Path | None = None, replace: bool = False) -> Path:
+    """`vtsbench leaderboard add`: store the scored entry, then re-render every board under
+    root (the new entry shows at once); returns the entry's path."""
+    path = add(submission, dataset, split, part, root=root, meta=meta, replace=replace)
+    render(root)
+    return path
+
+
+def rescore_and_render(root: str | Path, dataset: str | Path | VtsDataset, force: bool = False
+                       ) -> list[Path]:
+    """`vtsbench leaderboard rescore`: re-score the stale entries, then re-render; returns the
+    entries changed."""
+    changed = rescore(root, dataset, force=force)
+    render(root)
+    return changed

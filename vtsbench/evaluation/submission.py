@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import VtsError, one_line
+from ..recipes.submission import default_meta_path
 from .tasks import SLIP, STATE, TASKS, tasks_of
 
 if TYPE_CHECKING:
@@ -133,11 +134,6 @@ class Problems:
     def lines(self) -> list[str]:
         return [f"{kind}: {n} (first: {', '.join(ex)})" if ex and ex != [""] else kind
                 for kind, (n, ex) in self.found.items()]
-
-
-def default_meta_path(path: Path) -> Path:
-    """SUBMISSION.meta.json beside the submission (its suffix replaced)."""
-    return path.with_name(f"{path.stem}.meta.json")
 
 
 def read_rows(path: Path) -> dict[str, list[Any]]:

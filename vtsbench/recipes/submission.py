@@ -13,13 +13,17 @@ from typing import Any
 ROW_COLUMNS = ("sample_id", "task", "pred")
 
 
+def default_meta_path(path: Path) -> Path:
+    """SUBMISSION.meta.json beside the submission (its suffix replaced): where eval looks."""
+    return path.with_name(f"{path.stem}.meta.json")
+
+
 def write_submission(rows: Iterable[dict[str, Any]], out: str | Path, *, method: str,
                      dataset_path: str | Path, recipe: str | None = None,
                      seeds: list[int] | None = None, extra: dict[str, Any] | None = None
                      ) -> tuple[Path, Path]:
     """Write rows as a submission CSV and its metadata (OUT.meta.json) beside it."""
     from vtsbench.dataset.read.loader import load
-    from vtsbench.evaluation.submission import default_meta_path
 
     rows = list(rows)
     out = Path(out)

@@ -108,6 +108,7 @@ def make_benchmark(name: str, out: str | Path, *, seed: int | None = None, worke
     and the build resumes its finished shards. Returns what was made and the seconds of each
     step."""
     from ..dataset.build import BuildOptions, build
+    from ..dataset.format.layout import INFO_PATH
     from ..depth.calibration import calibrate, save_calibration
     from ..depth.report import write_report
     from .simulate import simulate
@@ -118,7 +119,7 @@ def make_benchmark(name: str, out: str | Path, *, seed: int | None = None, worke
     rec, ds = out / "recordings", out / "dataset"
     if out.exists() and not out.is_dir():
         raise VtsError("not a folder", out)
-    if (ds / "meta" / "info.json").exists() and not overwrite:
+    if (ds / INFO_PATH).exists() and not overwrite:
         raise VtsError("the benchmark's dataset exists (use --overwrite to make it again)", ds)
     seconds: dict[str, float] = {}
     t = time.perf_counter()

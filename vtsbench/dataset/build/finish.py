@@ -66,8 +66,8 @@ def build_params(manifest: Manifest, root: Path, cal_path: Path | None, opts: Bu
                  solver_note: str) -> dict[str, Any]:
     """The parameters recorded in info.json: what made the bytes, nothing about how it ran.
     Without depth (--no-depth) the depth, contact, calibration and solver are null."""
+    from ...depth.depthmaps import CONTACT_PARAMS
     from ..format.arrays import DEPTH_MAX_MM, DEPTH_MIN_MM
-    from .depthmaps import CONTACT_PARAMS
 
     depth = cal_path is not None
     return {

@@ -71,7 +71,7 @@ def _calibration(path: str, sha: str) -> Any:
 
 def _maker(cal: Any) -> Any:
     """The DepthMaker of a calibration, made once per process."""
-    from .depthmaps import DepthMaker
+    from ...depth.depthmaps import DepthMaker
 
     mk = cal.__dict__.get("_build_maker")
     if mk is None:
@@ -191,8 +191,8 @@ def pool_worker_init(parent: int) -> None:
     import scipy.fft  # noqa: F401
 
     from ...depth import calibration, mapping, poisson  # noqa: F401
+    from ...depth.depthmaps import DepthMaker  # noqa: F401
     from ...recordings import media  # noqa: F401
-    from .depthmaps import DepthMaker  # noqa: F401
     from .store import write_shard  # noqa: F401
 
 

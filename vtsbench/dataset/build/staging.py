@@ -58,8 +58,8 @@ def shard_tasks(plan: Plan, root: Path, stage: Path, calibration: Path | None, c
                 solver: str) -> list[ShardTask]:
     """One task per shard of each kind, with the fingerprint of everything its bytes use."""
     stats = SourceStats(root)
+    from ...depth.depthmaps import CONTACT_PARAMS
     from .card import PREVIEW_SAMPLES, preview_rows
-    from .depthmaps import CONTACT_PARAMS
 
     depth = "depth" in plan.layouts["static"].arrays
     base = {"version": FINGERPRINT_VERSION, "versions": versions(), "calibration": cal_sha,

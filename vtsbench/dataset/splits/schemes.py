@@ -20,7 +20,6 @@ from ...labels import STATES
 from ..format.records import PART_ORDER, SampleMeta, SplitFile
 from .leaks import BAND, OUTSIDE, UNKNOWN, location_keys
 
-SCHEMES = ("unseen_objects", "seen", "object_folds", "static_sessions", "static_locations")
 #: Held-out contact bands of static_locations: fractions of the frame width along x.
 DEFAULT_BANDS: tuple[tuple[float, float], ...] = ((1 / 3, 2 / 3),)
 TEST_FRACTION = 0.2
@@ -66,28 +65,66 @@ def make_splits(samples: Iterable[SampleMeta], *, seed: int = 0, unseen_k: int |
     if unseen_k is not None and n_obj and unseen_k >= n_obj:
         raise VtsError(f"unseen_objects: cannot hold out {unseen_k} of {n_obj} objects; "
                        "at least one must stay seen")
+    params = SchemeParams(seed, unseen_k, val_fraction, folds, test_fraction,
+                          tuple(location_bands), resolution)
     report = SplitReport()
-
-    def attempt(name: str, make: Callable[[], SplitFile]) -> SplitFile | None:
+    for name, make in REGISTRY.items():
         try:
-            split = make()
+            report.splits.append(make(ss, params, report))
         except VtsError as e:
             report.skipped[name] = str(e)
-            return None
-        report.splits.append(split)
-        return split
-
-    unseen = attempt("unseen_objects", lambda: unseen_objects_split(
-        ss, seed=seed, k=unseen_k, val_fraction=val_fraction))
-    held = [] if unseen is None else list(unseen.params["held_out_objects"])
-    attempt("seen", lambda: seen_split(ss, seed=seed, held_out=held, val_fraction=val_fraction,
-                                       test_fraction=test_fraction))
-    attempt("object_folds", lambda: object_folds_split(ss, seed=seed, folds=folds))
-    attempt("static_sessions", lambda: static_sessions_split(
-        ss, seed=seed, val_fraction=val_fraction, test_fraction=test_fraction))
-    attempt("static_locations", lambda: static_locations_split(
-        ss, seed=seed, val_fraction=val_fraction, resolution=resolution, bands=location_bands))
     return report
+
+
+@dataclass(frozen=True)
+class SchemeParams:
+    """The parameters every scheme maker is given (each reads the ones it needs)."""
+
+    seed: int
+    unseen_k: int | None
+    val_fraction: float
+    folds: int
+    test_fraction: float
+    bands: tuple[tuple[float, float], ...]
+    resolution: tuple[int, int] | None
+
+
+def _make_unseen(ss: list[SampleMeta], p: SchemeParams, made: SplitReport) -> SplitFile:
+    return unseen_objects_split(ss, seed=p.seed, k=p.unseen_k, val_fraction=p.val_fraction)
+
+
+def _make_seen(ss: list[SampleMeta], p: SchemeParams, made: SplitReport) -> SplitFile:
+    unseen = made.get("unseen_objects")  # seen holds out no object that unseen_objects tests
+    held = [] if unseen is None else list(unseen.params["held_out_objects"])
+    return seen_split(ss, seed=p.seed, held_out=held, val_fraction=p.val_fraction,
+                      test_fraction=p.test_fraction)
+
+
+def _make_folds(ss: list[SampleMeta], p: SchemeParams, made: SplitReport) -> SplitFile:
+    return object_folds_split(ss, seed=p.seed, folds=p.folds)
+
+
+def _make_sessions(ss: list[SampleMeta], p: SchemeParams, made: SplitReport) -> SplitFile:
+    return static_sessions_split(ss, seed=p.seed, val_fraction=p.val_fraction,
+                                 test_fraction=p.test_fraction)
+
+
+def _make_locations(ss: list[SampleMeta], p: SchemeParams, made: SplitReport) -> SplitFile:
+    return static_locations_split(ss, seed=p.seed, val_fraction=p.val_fraction,
+                                  resolution=p.resolution, bands=p.bands)
+
+
+#: The fixed schemes by name, in the order a build makes them (a maker may read the splits
+#: made before it: seen reads unseen_objects' held-out objects). A scheme the samples cannot
+#: support raises VtsError and is skipped with its reason.
+REGISTRY: dict[str, Callable[[list[SampleMeta], SchemeParams, SplitReport], SplitFile]] = {
+    "unseen_objects": _make_unseen,
+    "seen": _make_seen,
+    "object_folds": _make_folds,
+    "static_sessions": _make_sessions,
+    "static_locations": _make_locations,
+}
+SCHEMES = tuple(REGISTRY)
 
 
 def _check_params(seed: int, unseen_k: int | None, val_fraction: float, folds: int,

@@ -62,6 +62,17 @@ class ExportResult:
     seconds: float
     kept: int = 0  # parquet files kept from an interrupted export
 
+    def summary(self) -> str:
+        """The one line `vtsbench export-hf` prints: rows, files, bytes, time, configs."""
+        from .info import human
+
+        lay = self.layout
+        n = sum(f.rows for fs in lay.files.values() for f in fs)
+        files = sum(len(fs) for fs in lay.files.values())
+        kept = f" ({self.kept} kept from an interrupted export)" if self.kept else ""
+        return (f"{n} samples in {files} parquet files ({human(lay.nbytes())}) in "
+                f"{self.seconds:.1f} s{kept}; configs: {', '.join(lay.configs)}")
+
 
 #: The export's state folder inside its stage: a marker per finished parquet file.
 EXPORT_WORK = ".export"

@@ -47,6 +47,25 @@ class PushPlan:
     def nbytes(self) -> int:
         return sum(n for _, n in self.files)
 
+    #: Said before an upload of a dataset without its parquet copy.
+    NO_HUB_COPY = ("no hf/ folder: run `vtsbench export-hf` first for the Hub viewer and "
+                   "datasets.load_dataset configs")
+
+    def listing(self, repo_id: str) -> list[str]:
+        """A dry run's lines: each file with its size, then what an upload would send."""
+        from .info import human
+
+        left = f"; leaving out {len(self.left_out)} Zarr files" if self.left_out else ""
+        return [f"{human(size):>10}  {rel}" for rel, size in self.files] + [
+            f"dry run: would upload {len(self.files)} files ({human(self.nbytes)}) to "
+            f"datasets/{repo_id}{left}"]
+
+    def uploaded(self, url: str) -> str:
+        """The line printed after an upload."""
+        from .info import human
+
+        return f"uploaded {len(self.files)} files ({human(self.nbytes)}): {url}"
+
 
 def push_plan(dataset: str | Path, zarr: bool = True, repo_id: str | None = None) -> PushPlan:
     """What `push` uploads: every file of the verified dataset (without data/ when zarr=False,

@@ -51,8 +51,8 @@ class DepthMaker:
     """Depth (mm, float32) and contact (bool) of RGB frames for one calibration (reusable)."""
 
     def __init__(self, cal: Any) -> None:
-        from ...depth.mapping import LutMapping, norm_xy
-        from ...depth.poisson import border_mask, inverse_eigenvalues, spacing
+        from .mapping import LutMapping, norm_xy
+        from .poisson import border_mask, inverse_eigenvalues, spacing
 
         self.cal = cal
         h, w = self.shape = cal.resolution
@@ -179,7 +179,7 @@ class DepthMaker:
             if still.any():
                 g[still] = 0.0
         if self.fill is not None and self.fill.any():
-            from ...depth.markers import fill_gradients
+            from .markers import fill_gradients
 
             g[...] = fill_gradients(g, self.fill)
         return g
@@ -194,7 +194,7 @@ class DepthMaker:
         import scipy.fft
 
         if solver == "masked":
-            from ...depth.poisson import integrate
+            from .poisson import integrate
 
             return integrate(g[..., 0], g[..., 1], method="masked", mask=mask,
                              mm_per_px=self.cal.mm_per_px, dtype=np.float32)
@@ -248,7 +248,7 @@ class DepthMaker:
         as vtsbench.depth.mask.clean_mask."""
         import cv2
 
-        from ...depth.mask import clean_mask
+        from .mask import clean_mask
 
         p = CONTACT_PARAMS
         sq = cv2.multiply(diff, diff)  # squares, exact as numpy's: 0.1 ms against 1.4 (einsum)

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .errors import VtsError
+from ..errors import VtsError
 
 #: The merged config, written once training succeeded: its presence marks a finished run.
 CONFIG_NAME = "config.json"
@@ -32,7 +32,8 @@ def train_run(recipe: str, dataset: str | Path, split: str, out: str | Path, *,
 
     A run that fails before its first checkpoint leaves no folder behind; one that has
     checkpoints keeps them, so that the next train resumes."""
-    from .recipes import guarded, load_config, load_recipe
+    from .config import load_config
+    from .registry import guarded, load_recipe
 
     rec = load_recipe(recipe)
     cfg = load_config(rec, config)
@@ -54,7 +55,7 @@ def train_run(recipe: str, dataset: str | Path, split: str, out: str | Path, *,
 
 def finish_run(out: str | Path, config: dict[str, Any]) -> Path:
     """Write the run's merged config (OUT/config.json), which marks the run finished."""
-    from .atomic import write_text_atomic
+    from ..atomic import write_text_atomic
 
     path = Path(out) / CONFIG_NAME
     write_text_atomic(path, json.dumps(config, indent=1, sort_keys=True) + "\n")
@@ -63,7 +64,7 @@ def finish_run(out: str | Path, config: dict[str, Any]) -> Path:
 
 def read_run_config(out: str | Path) -> dict[str, Any]:
     """The config a finished run in OUT trained with; a VtsError if the run never finished."""
-    from .jsonio import read_json
+    from ..jsonio import read_json
 
     path = Path(out) / CONFIG_NAME
     if not path.is_file():

@@ -47,7 +47,9 @@ def predict_submission(recipe: str, checkpoint: str | Path, dataset: str | Path,
     """Predict a split part with RECIPE (a registered name or a .py file) from CHECKPOINT and
     write the submission OUT and OUT.meta.json; METHOD defaults to the recipe's name, SEED is
     the training seed recorded in the metadata."""
-    from ..recipes import check_checkpoint, guarded, load_recipe, write_submission
+    from .checkpoints import check_checkpoint
+    from .registry import guarded, load_recipe
+    from .submission import write_submission
 
     rec = load_recipe(recipe)
     checkpoint = Path(checkpoint)
