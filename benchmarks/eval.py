@@ -40,9 +40,8 @@ def fake_dataset(root: Path) -> Path:
     empty index/static.parquet; loads with `vtsbench.load`."""
     import pyarrow as pa
     import pyarrow.parquet as pq
-    from vtsbench.dataset.format.index import kind_counts
 
-    from vtsbench.dataset.format.index import index_schema
+    from vtsbench.dataset.format.index import index_schema, kind_counts
     from vtsbench.dataset.format.info import Counts, DatasetInfo, ZarrSettings
     from vtsbench.dataset.format.records import SplitFile
     from vtsbench.dataset.splits import write_splits

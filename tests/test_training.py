@@ -12,36 +12,15 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
+from tests.fixtures.data import ROOT  # noqa: E402
+from tests.fixtures.training import CFG, ce, tiny_data, tiny_model  # noqa: E402
 from vtsbench.training import (  # noqa: E402
-    TrainConfig,
     batch_indices,
     last_checkpoint,
     load_checkpoint,
     save_checkpoint,
     train_loop,
 )
-
-
-def tiny_data(n: int = 24) -> list[tuple[torch.Tensor, torch.Tensor]]:
-    g = torch.Generator().manual_seed(1)
-    x = torch.randn(n, 6, generator=g)
-    y = (x[:, 0] + x[:, 1] > 0).long()
-    return [(x[i], y[i]) for i in range(n)]
-
-
-def tiny_model() -> torch.nn.Module:
-    torch.manual_seed(123)
-    return torch.nn.Sequential(torch.nn.Linear(6, 16), torch.nn.ReLU(), torch.nn.Dropout(0.3),
-                               torch.nn.Linear(16, 2))
-
-
-def ce(model, batch, device):
-    x, y = batch
-    return torch.nn.functional.cross_entropy(model(x.to(device)), y.to(device))
-
-
-CFG = TrainConfig(steps=13, batch_size=4, lr=1e-2, checkpoint_every=5, warmup_steps=2,
-                  schedule="cosine", grad_clip=1.0)
 
 
 def weights(model: torch.nn.Module) -> dict[str, torch.Tensor]:
@@ -114,8 +93,8 @@ def test_checkpoint_is_safetensors_with_optimizer_and_rng(tmp_path: Path) -> Non
 
 DDP_SCRIPT = textwrap.dedent("""
     import sys, torch
-    sys.path.insert(0, {tests!r})
-    from test_training import CFG, ce, tiny_data, tiny_model
+    sys.path.insert(0, {root!r})
+    from tests.fixtures.training import CFG, ce, tiny_data, tiny_model
     from vtsbench.training import train_loop, dist_env
     import dataclasses
     cfg = dataclasses.replace(CFG, steps=6, checkpoint_every=4)
@@ -132,7 +111,7 @@ def test_ddp_gloo_two_processes_agree(tmp_path: Path) -> None:
     out = tmp_path / "ddp"
     out.mkdir()
     script = tmp_path / "ddp_run.py"
-    script.write_text(DDP_SCRIPT.format(tests=str(Path(__file__).parent), out=str(out)))
+    script.write_text(DDP_SCRIPT.format(root=str(ROOT), out=str(out)))
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     proc = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone",
                            "--nproc_per_node", "2", str(script)], capture_output=True,
@@ -150,8 +129,8 @@ def test_ddp_gloo_two_processes_agree(tmp_path: Path) -> None:
 
 KILL_SCRIPT = textwrap.dedent("""
     import sys, time, torch
-    sys.path.insert(0, {tests!r})
-    from test_training import CFG, ce, tiny_data, tiny_model
+    sys.path.insert(0, {root!r})
+    from tests.fixtures.training import CFG, ce, tiny_data, tiny_model
     from vtsbench.training import train_loop
 
     def slow(model, batch, device):
@@ -169,7 +148,7 @@ def test_sigkill_then_resume_matches_uninterrupted(tmp_path: Path) -> None:
 
     out = tmp_path / "killed"
     script = tmp_path / "kill_run.py"
-    script.write_text(KILL_SCRIPT.format(tests=str(Path(__file__).parent), out=str(out)))
+    script.write_text(KILL_SCRIPT.format(root=str(ROOT), out=str(out)))
     proc = subprocess.Popen([sys.executable, str(script)],
                             env={**os.environ, "OMP_NUM_THREADS": "1"})
     try:

@@ -1,8 +1,8 @@
 """Atomic file and folder writes: output appears complete or not at all.
 
-The one way the package writes its outputs (tests/test_atomic_outputs.py fails on a module that
-writes a file by other means): bytes and text through a temporary name and a rename, a path to
-hand to a library that writes by name (`replacing`), and staged folders.
+The one way the package writes its outputs (tests/project/test_atomic_outputs.py fails on a
+module that writes a file by other means): bytes and text through a temporary name and a rename,
+a path to hand to a library that writes by name (`replacing`), and staged folders.
 """
 
 from __future__ import annotations

@@ -108,7 +108,19 @@ def init_distributed(device: torch.device) -> bool:
         if device.type == "cuda":
             torch.cuda.set_device(device)
         dist.init_process_group(backend=backend, rank=rank, world_size=world)
+        # Leave the group at exit: a gloo group still open when the interpreter ends can abort
+        # the process ("terminate called without an active exception") after the work is done.
+        import atexit
+
+        atexit.register(_leave_group)
     return True
+
+
+def _leave_group() -> None:
+    import torch.distributed as dist
+
+    if dist.is_initialized():
+        dist.destroy_process_group()
 
 
 def batch_indices(n: int, step: int, batch_size: int, seed: int, rank: int = 0,

@@ -9,7 +9,7 @@ press itself never trains the calibration it is fitted with), then every press's
 to its predicted slopes, for a few rounds. A circle off its imprint by a few pixels trains
 slopes that the other presses contradict, so its centre moves to where the colour says the
 apex is; on simulated presses with known centres, labels moved by 3-4 px come back to within
-about a pixel (tests/test_centres.py).
+about a pixel (tests/depth/test_centres.py).
 
 It is a check, not a detector: it needs a start within a few pixels and MIN_PRESSES presses,
 and a shift shared by every circle is only weakly fixed (the mapping can partly absorb it).

@@ -2,10 +2,11 @@
 
 `DepthMaker(calibration).depth(rgb, solver)` gives the same float32 depth as
 `vtsbench.depth.reconstruct.reconstruct(rgb, calibration, solver=solver)` for "dct" and "dst",
-bit for bit (the same float32 operations in the same order; tests/test_build_depth.py), but one
-frame at a time in preallocated buffers, without the copies and dtype conversions the general
-path makes between the colour difference, the mapping and the solver, and with one FFT thread.
-The "masked" solver goes through `vtsbench.depth.poisson.integrate` with the contact mask.
+bit for bit (the same float32 operations in the same order; tests/depth/test_build_depth.py),
+but one frame at a time in preallocated buffers, without the copies and dtype conversions the
+general path makes between the colour difference, the mapping and the solver, and with one FFT
+thread. The "masked" solver goes through `vtsbench.depth.poisson.integrate` with the contact
+mask.
 
 Measured at 480x640 on one core of a 2-core AMD EPYC (lut + dct): 12.9 ms a frame through
 `reconstruct`, 5.2 ms here (colour difference 1.2, lut 0.9, integration 3.1 of which the two
@@ -254,7 +255,7 @@ class DepthMaker:
         sq = cv2.multiply(diff, diff)  # squares, exact as numpy's: 0.1 ms against 1.4 (einsum)
         # (r + g) + b in float32 as numpy sums the interleaved channels, in one pass: the
         # weights are 1, so every product is exact and the sums are those of two additions
-        # (tests/test_build_depth.py): 0.9 ms against 2.4 ms for splitting and adding the
+        # (tests/depth/test_build_depth.py): 0.9 ms against 2.4 ms for splitting and adding the
         # channels, on 400 frames at 480x640
         d2 = cv2.transform(sq, _ONES)
         raw = d2 > np.float32((p["threshold"] * 255.0) ** 2)

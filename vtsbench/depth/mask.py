@@ -12,11 +12,11 @@ Both estimators threshold a per-pixel signal and then clean the result frame by 
 5. dilation by dilate_px pixels: the masked solver holds every pixel outside the mask at zero
    depth, so the mask has to reach a little beyond the contact, onto gel that is truly flat.
    Without it the rim pixel, whose slope is large, sits right next to a forced zero and the
-   reconstruction loses the rim's step (measured in tests/test_poisson.py).
+   reconstruction loses the rim's step (measured in tests/depth/test_poisson.py).
 
 The morphology pads the frame by the structuring element's reach, so a contact touching the
 border is neither eroded nor glued to it. The cleaning runs on OpenCV and gives, pixel for pixel,
-what scipy.ndimage's binary morphology gives (checked in tests/test_build_depth.py).
+what scipy.ndimage's binary morphology gives (checked in tests/depth/test_build_depth.py).
 """
 
 from __future__ import annotations

@@ -90,7 +90,7 @@ def _numpy_depth(frames: np.ndarray, cal: Calibration, solver: str,
 
     if solver != "masked" and cal.markers is None and frames.dtype == np.uint8:
         # a frame at a time through the build's preallocated path: the same float32 numbers
-        # (vtsbench.dataset.depthmaps; tests/test_build_depth.py), arrays that stay in cache
+        # (vtsbench.dataset.depthmaps; tests/depth/test_build_depth.py), arrays that stay in cache
         maker = _maker(cal)
         return np.stack([maker.depth(f, solver) for f in frames])
     g = cal.gradients(frames)

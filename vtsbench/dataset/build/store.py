@@ -113,9 +113,9 @@ def encode_shard(layout: Layout, name: str, block: np.ndarray) -> bytes:
     chunk (one sample, C order, little-endian) through numcodecs' zstd (what zarr's ZstdCodec
     calls) and followed by its crc32c, in row order, then the index of (offset, length) pairs,
     absent chunks 2^64 - 1, and its crc32c. The same bytes as zarr's own encoding
-    (`encode_shard_zarr`; tests/test_store.py compares them), in 2.3 ms a 480x640 frame for
-    rgb, depth and contact against 3.2 ms through zarr's codec pipeline, and without zarr in
-    the build's workers.
+    (`encode_shard_zarr`; tests/dataset/build/test_store.py compares them), in 2.3 ms a 480x640
+    frame for rgb, depth and contact against 3.2 ms through zarr's codec pipeline, and without
+    zarr in the build's workers.
     """
     _check_block(layout, name, block)
     return b"".join(_direct_shard(layout, name, block))

@@ -1,0 +1,232 @@
+"""Marker gels: dots found in the background and in each frame, left out of the fit, filled in
+the gradients before integration; checked on simulated presses with a printed grid multiplied
+on, against the exact truth of the same presses without it."""
+
+from __future__ import annotations
+
+import importlib.util
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.fixtures.calibration import MM_PER_PX, sim_folder
+from vtsbench.depth.calibration import (
+    calibrate,
+    colour_difference,
+    load_calibration,
+    save_calibration,
+)
+from vtsbench.depth.markers import (
+    detect_markers,
+    dot_correction,
+    fill_gradients,
+    marker_mask,
+    transmission,
+)
+from vtsbench.depth.reconstruct import reconstruct
+from vtsbench.recordings.manifest import load_manifest
+from vtsbench.recordings.media import read_image, write_png
+
+
+def dot_layer(h: int, w: int, mm: float, pitch: float = 1.2, diameter: float = 0.42,
+              darkness: float = 0.7, edge: float = 0.08) -> np.ndarray:
+    """Transmission (H, W) of a printed grid of soft dark dots (pitch, diameter in mm)."""
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64) + 0.5
+    p = pitch / mm
+    dx, dy = ((x / p + 0.3) % 1 - 0.5) * p, ((y / p + 0.6) % 1 - 0.5) * p
+    t = np.clip((np.hypot(dx, dy) * mm - (diameter / 2 - edge / 2)) / edge, 0, 1)
+    return 1 - darkness * (1 - t)
+
+
+@pytest.fixture(scope="module")
+def folders(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, np.ndarray]:
+    """The simulated presses, and the same with a dot grid multiplied on frames and background."""
+    plain = sim_folder(tmp_path_factory)
+    marked = tmp_path_factory.mktemp("markers") / "sim"
+    shutil.copytree(plain, marked)
+    m = load_manifest(marked)
+    img = read_image(marked / m.entries[0].source.path)
+    layer = dot_layer(*img.shape[:2], MM_PER_PX)
+    files = {e.source.path for e in m.entries} | {s.background for s in m.sessions
+                                                  if s.background}
+    for f in files:
+        im = read_image(marked / f).astype(np.float64)
+        write_png(marked / f, np.clip(np.rint(im * layer[..., None]), 0, 255).astype(np.uint8))
+    return plain, marked, layer
+
+
+def held_rmse(run) -> float:
+    return float(np.mean([h.errors["plane_aligned_rmse_mm"] for h in run.held_out]))
+
+
+def test_marker_gel_depth_within_1_2x_of_the_same_presses_without(folders) -> None:
+    plain, marked, _ = folders
+    base = calibrate(plain, method="poly", holdout=2, seed=1, device=None)
+    run = calibrate(marked, method="poly", holdout=2, seed=1, device=None)
+    off = calibrate(marked, method="poly", holdout=2, seed=1, device=None, markers="off")
+    assert base.calibration.markers is None  # a markerless gel: nothing found
+    spec = run.calibration.markers
+    assert spec is not None and spec.n_dots >= 40 and 6 <= spec.diameter_px <= 10
+    # scored against the exact truth of the simulated presses (the same with or without dots)
+    assert [h.reference for h in run.held_out] == ["truth", "truth"]
+    assert held_rmse(run) <= 1.2 * held_rmse(base)
+    assert held_rmse(off) > 1.5 * held_rmse(base)  # left in, the dots are learnt as slopes
+
+
+def test_dividing_by_the_dots_transmission_gives_the_difference_without_them(folders) -> None:
+    plain, marked, layer = folders
+    m = load_manifest(marked)
+    bg0 = read_image(plain / m.sessions[0].background)
+    bg1 = read_image(marked / m.sessions[0].background)
+    spec = detect_markers(bg1, MM_PER_PX)
+    assert spec is not None
+    trans = transmission(bg1, spec)
+    semi = layer < 0.9  # every dot pixel: the dots' cores pass 30 % of the light
+    np.testing.assert_allclose(trans.mean(axis=-1)[semi], layer[semi], atol=0.06)
+    errs, raws = [], []
+    for e in m.entries[:4]:
+        im0, im1 = read_image(plain / e.source.path), read_image(marked / e.source.path)
+        gain, fill = dot_correction(im1, spec, bg1, trans)
+        assert not fill[semi].any()  # still dots, none below DOT_MIN_TRANSMISSION: all divided
+        d0 = colour_difference(im0, bg0, 0.0)
+        changed = semi & (np.abs(d0).max(axis=-1) >= 10)  # on a dot, where the press shows
+        errs.append(np.abs(colour_difference(im1, bg1, 0.0, gain=gain) - d0)[changed])
+        raws.append(np.abs(colour_difference(im1, bg1, 0.0) - d0)[changed])
+    err, raw = np.concatenate(errs), np.concatenate(raws)
+    assert err.size > 500
+    assert float(np.mean(err)) < 1.5 and float(np.mean(err)) < 0.15 * float(np.mean(raw))
+
+
+def test_a_dot_that_moved_is_filled_whole(folders) -> None:
+    plain, marked, layer = folders
+    m = load_manifest(marked)
+    bg1 = read_image(marked / m.sessions[0].background)
+    spec = detect_markers(bg1, MM_PER_PX)
+    trans = transmission(bg1, spec)
+    im0 = read_image(plain / m.entries[0].source.path).astype(np.float64)
+    w = layer.shape[1]
+    moved = layer.copy()
+    moved[:, : w // 2] = np.roll(layer, 2, axis=1)[:, : w // 2]  # the left half slid 2 px
+    frame = np.clip(np.rint(im0 * moved[..., None]), 0, 255).astype(np.uint8)
+    _, fill = dot_correction(frame, spec, bg1, trans)
+    dots = layer < 0.9
+    left, right = dots.copy(), dots.copy()
+    left[:, w // 2 - 12:] = False  # the dots wholly in either half
+    right[:, : w // 2 + 12] = False
+    assert fill[left].mean() > 0.99 and fill[right].mean() < 0.01
+
+
+def test_marker_gel_flat_frame_gives_flat_depth_and_the_file_keeps_the_dots(folders,
+                                                                            tmp_path) -> None:
+    plain_folder, marked, _ = folders
+    run = calibrate(marked, method="lut", holdout=2, seed=1, device=None,
+                    options={"bins": 24, "cells": 2})
+    cal = load_calibration(save_calibration(run.calibration, tmp_path / "m.safetensors"))
+    assert cal.markers == run.calibration.markers
+    assert cal.metadata()["features"]["markers"]["n_dots"] == cal.markers.n_dots
+    assert not np.any(reconstruct(cal.background, cal))  # the background: exactly flat
+    if importlib.util.find_spec("torch") is not None:  # the torch path fills the dots too
+        img = run.held_out[0].press.image
+        np.testing.assert_allclose(reconstruct(img, cal, device="cpu"), reconstruct(img, cal),
+                                   atol=2e-4)
+    # divided back, the dots leave the gradient error over a press's contact as it is on the
+    # same gel without them (whose error alone follows this grid by chance: |r| 0.2 on the
+    # first press); left in the fit, they add their own (high-passed error differences)
+    off = calibrate(marked, method="lut", holdout=2, seed=1, device=None, markers="off",
+                    options={"bins": 24, "cells": 2})
+    plain = calibrate(plain_folder, method="lut", holdout=2, seed=1, device=None,
+                      options={"bins": 24, "cells": 2})
+    for k in range(2):
+        base = slope_error(plain.calibration, plain.held_out[k])
+        added = [added_pattern(slope_error(r.calibration, r.held_out[k]), base,
+                               plain.held_out[k].region) for r in (run, off)]
+        assert added[0] < 0.65 * added[1]
+
+
+def slope_error(cal, held) -> np.ndarray:
+    """(H, W, 2) error of the calibration's gradients against the exact ones of a press."""
+    g = cal.gradients(held.press.image)
+    tq, tp = np.gradient(held.true_depth, *cal.mm_per_px[::-1])
+    return np.stack([g[..., 0] - tp, g[..., 1] - tq], -1)
+
+
+def added_pattern(err: np.ndarray, base: np.ndarray, region: np.ndarray) -> float:
+    """RMS over the contact of the high-passed difference between two slope errors."""
+    from scipy import ndimage
+
+    d = err - base
+    hp = d - ndimage.gaussian_filter(d, (3, 3, 0))
+    inner = ndimage.binary_erosion(region, iterations=3)
+    return float(np.sqrt((hp[inner] ** 2).sum(axis=-1).mean()))
+
+
+def test_detect_markers_on_a_grid_and_not_on_plain_gel() -> None:
+    rng = np.random.default_rng(3)
+    h, w, mm = 120, 160, 0.06
+    gel = np.full((h, w, 3), (150, 120, 100), np.float64) + rng.normal(0, 1.5, (h, w, 3))
+    shade = np.linspace(0.8, 1.1, w)[None, :, None]  # light falling off across the gel
+    plain = np.clip(gel * shade, 0, 255).astype(np.uint8)
+    assert detect_markers(plain, mm) is None
+    dotted = np.clip(gel * shade * dot_layer(h, w, mm)[..., None], 0, 255).astype(np.uint8)
+    spec = detect_markers(dotted, mm)
+    assert spec is not None and spec.n_dots >= 40
+    m = marker_mask(dotted, spec)
+    truth = dot_layer(h, w, mm) < 0.95
+    assert m[truth].mean() > 0.98  # every dot pixel masked ...
+    assert m.mean() < 2.5 * truth.mean()  # ... and not much else
+
+
+def test_harmonic_fill_is_exact_on_a_linear_field() -> None:
+    y, x = np.mgrid[0:40, 0:50].astype(np.float32)
+    g = np.stack([0.01 * x - 0.3, 0.02 * y + 0.005 * x], -1)
+    mask = np.zeros((40, 50), bool)
+    mask[10:18, 12:20] = mask[25:33, 30:45] = True
+    broken = g.copy()
+    broken[mask] = 5.0
+    out = fill_gradients(broken, mask)
+    np.testing.assert_allclose(out, g, atol=2e-5)
+    np.testing.assert_array_equal(fill_gradients(g, np.zeros_like(mask)), g)
+
+
+def test_build_depth_of_a_marker_gel_is_the_calibrations(folders) -> None:
+    """The dataset build's depth path (DepthMaker) divides and fills the dots as
+    Calibration.gradients does; on a plain gel it still takes none of it."""
+    import dataclasses
+
+    from vtsbench.dataset.build.shard import depth_and_contact
+    from vtsbench.depth.depthmaps import DepthMaker
+    from vtsbench.depth.poisson import integrate
+
+    plain_folder, marked, layer = folders
+    m = load_manifest(marked)
+    press = read_image(plain_folder / m.entries[0].source.path).astype(np.float64)
+    moved = layer.copy()
+    w = layer.shape[1]
+    moved[:, : w // 2] = np.roll(layer, 2, axis=1)[:, : w // 2]  # the left half's dots slid
+    slid = np.clip(np.rint(press * moved[..., None]), 0, 255).astype(np.uint8)
+    for folder, has_dots in ((marked, True), (plain_folder, False)):
+        cal = calibrate(folder, method="lut", holdout=2, seed=1, device=None,
+                        options={"bins": 24, "cells": 2}).calibration
+        assert (cal.markers is not None) == has_dots
+        maker = DepthMaker(cal)
+        frames = [read_image(folder / e.source.path) for e in m.entries[:2]]
+        for k, img in enumerate([*frames, slid] if has_dots else frames):
+            g = cal.gradients(img)
+            for solver in ("dct", "dst"):
+                want = integrate(g[..., 0], g[..., 1], method=solver, mm_per_px=cal.mm_per_px,
+                                 dtype=np.float32)
+                got = maker.depth(img, solver)
+                assert (maker.fill is not None) == has_dots
+                if has_dots:
+                    np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)
+                else:  # unchanged: bit for bit
+                    np.testing.assert_array_equal(got, want)
+            if k == 2:  # the slid dots are filled, not divided
+                assert maker.fill[:, : w // 2 - 12].sum() > 200
+            built = depth_and_contact(img[None], cal, "dct")[0][0]
+            np.testing.assert_array_equal(built, maker.depth(img, "dct"))
+            if has_dots:  # the dots left in the difference show in the depth
+                raw = DepthMaker(dataclasses.replace(cal, markers=None)).depth(img, "dct")
+                assert float(np.abs(raw - maker.depth(img, "dct")).max()) > 0.02
