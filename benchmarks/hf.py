@@ -84,14 +84,17 @@ def consume(rows: Iterable[dict[str, Any]]) -> int:
     return n
 
 
-def numpy_rows(ds: Any) -> Iterable[dict[str, Any]]:
-    """Rows of a datasets Dataset or IterableDataset as numpy, images as uint8 arrays."""
+def numpy_rows(ds: Any, scale_mm: float = 0.001) -> Iterable[dict[str, Any]]:
+    """Rows of a datasets Dataset or IterableDataset as numpy, images as uint8 arrays, depth in
+    mm: from the 16-bit images of the int16 counts (hub layout 2) or as stored (layout 1)."""
     for r in ds:
         r = dict(r)
-        for name in ("rgb", "contact"):
+        for name in ("rgb", "depth", "contact"):
             if isinstance(r[name], list):
                 r[name] = np.stack([np.asarray(im) for im in r[name]])
-        r["depth"] = np.asarray(r["depth"], dtype=np.float32)
+        depth = np.asarray(r["depth"])
+        r["depth"] = (depth.view(np.int16).astype(np.float32) * np.float32(scale_mm)
+                      if depth.dtype == np.uint16 else depth.astype(np.float32))
         r["contact"] = np.asarray(r["contact"], dtype=bool)
         yield r
 

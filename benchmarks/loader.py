@@ -1,26 +1,43 @@
-"""Loader throughput: slip sequences/s through vtsbench.load against a PNG folder and datasets.
+"""Every way to read a built dataset, in one run, against the Zarr loader: samples/s, ratios, CPU.
 
-Run: .venv/bin/python benchmarks/loader.py [--sequences 24] [--size 480x640] [--repeats 3]
-     [--dataset BUILT_DATASET]
+Run: .venv/bin/python benchmarks/loader.py [--sequences 36] [--size 480x640] [--repeats 3]
+     [--workers 2] [--dataset BUILT_DATASET] [--formats]
 
-Builds a dataset from simulated recordings (simulate, calibrate, build) in a temporary folder,
-then writes the same slip samples two other ways: (a) a folder of PNGs, one per frame, depth as
-16-bit PNG (the int16 counts' bits), and (b) a `datasets` parquet file with `Image()` features
-(the same PNG bytes). Every reader returns rgb uint8 (T, H, W, 3) and depth float32 mm (T, H, W)
-per sequence. Reported: sequences/s in index order and in a random order (best of --repeats,
-page cache warm: this measures decoding, not the disk), and DataLoader throughput with 0 and 2
-workers. Prints a markdown table and the machine; removes everything it wrote.
+Builds a dataset from simulated recordings (simulate, calibrate with lut, build: hf.py's
+make_dataset) in a temporary folder, writes its Hugging Face copy (export-hf), then reads every
+slip sample each way, the readers taking turns within each of --repeats rounds (best counts; the
+page cache is warm, so this measures decoding, not the disk):
+
+- the Zarr loader, `view.read([i], arrays)`, one sample per call in a shuffled order: rgb and
+  depth (the baseline of the torch rows) and rgb, depth and contact (of the Hugging Face rows);
+- `view.to_torch("rgbd")` through a shuffled DataLoader (batch 4, a new DataLoader each pass, so
+  worker start-up counts) with 0 and --workers workers, at the stored size and resized to
+  224x224, as uint8 frames (the default) and with dtype="float32" (the tensors of earlier
+  versions, bit for bit: the before of the same run);
+- `view.to_hf()`, streamed from the Zarr store (rgb, depth, contact as numpy);
+- `datasets.load_dataset(DATASET, "slip_all")` after its cache is built, rows read by index in the
+  same shuffled order, without a format (PIL images, made numpy) and with `.with_format("numpy")`,
+  and the same with `streaming=True` (iterated);
+- the first `load_dataset` call: seconds to build the Arrow cache, its bytes against the parquet's.
+
+Every reader's arrays are checked against the loader's before timing. CPU is the process's and
+its finished children's (DataLoader workers) user + system time per sample: other jobs on a
+shared machine slow the wall clock, not this. --formats adds the earlier format comparison (a
+PNG folder and a parquet of Image() read through datasets). Prints markdown tables and the
+machine; removes everything it wrote.
 """
 
 from __future__ import annotations
 
 import argparse
+import inspect
+import os
+import resource
 import shutil
 import sys
 import tempfile
 import time
 from collections.abc import Callable, Sequence
-from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +45,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from hf import column_bytes, folder_bytes, make_dataset  # benchmarks/hf.py
 from machine import machine  # benchmarks/machine.py: the shared machine line
 
 import vtsbench
@@ -36,24 +54,126 @@ from vtsbench.dataset.format.layout import DEPTH_SCALE_MM
 from vtsbench.dataset.read.view import View
 
 Reader = Callable[[int], tuple[np.ndarray, np.ndarray]]
+ALL = ("rgb", "depth", "contact")
+SMALL = (224, 224)
+#: Whether to_torch has dtype (uint8 frames); without it (earlier versions) it gives float32.
+HAS_DTYPE = "dtype" in inspect.signature(View.to_torch).parameters
 
 
-def build_dataset(work: Path, sequences: int, size: tuple[int, int]) -> Path:
-    """Simulated recordings -> calibration (poly) -> dataset, with the library functions."""
-    from vtsbench.dataset.build.pipeline import BuildOptions, build
-    from vtsbench.depth.calibration import calibrate, save_calibration
-    from vtsbench.sim.simulate import simulate
-
-    rec = work / "recordings"
-    simulate(rec, seed=0, n_static=2, n_sequences=sequences, n_presses=12, size=size,
-             mm_per_px=0.03, workers=2, progress=False)
-    run = calibrate(rec, method="poly")
-    save_calibration(run.calibration, rec / "calibration.safetensors")
-    build(rec, work / "dataset", BuildOptions(workers=2))
-    return work / "dataset"
+def cpu_s() -> float:
+    """User + system seconds of this process and its finished children (DataLoader workers)."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(
+        resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-# -- the two other formats ------------------------------------------------------------------
+# -- the readers --------------------------------------------------------------------------
+
+
+def zarr_job(view: View, order: Sequence[int], arrays: Sequence[str]) -> Callable[[], int]:
+    """The Zarr loader: one `view.read` per sample, in `order`."""
+    def run() -> int:
+        for i in order:
+            view.read([i], arrays)
+        return len(order)
+
+    return run
+
+
+def torch_job(view: View, modality: str, size: tuple[int, int] | None, workers: int,
+              dtype: str, persistent: bool = False) -> Callable[[], int]:
+    """One shuffled DataLoader pass (batch 4) over view.to_torch(modality): a new DataLoader
+    each pass, so its workers start (and open the store) within it; or, persistent, one
+    DataLoader whose workers stay (a later epoch of a training run), warmed up here."""
+    import torch
+    from torch.utils.data import DataLoader
+
+    kw = {"dtype": dtype} if HAS_DTYPE else {}  # before dtype="uint8": float32 only
+    data = view.to_torch(modality, size=size, **kw)
+
+    def loader() -> Any:
+        return DataLoader(data, batch_size=4, shuffle=True, num_workers=workers,
+                          generator=torch.Generator().manual_seed(0),
+                          persistent_workers=persistent)
+
+    kept = loader() if persistent else None
+
+    def run() -> int:
+        return sum(len(t["sample_id"]) for _x, t in (kept or loader()))
+
+    if kept is not None:
+        run()
+    return run
+
+
+def hf_row_arrays(row: dict[str, Any], scale_mm: float) -> dict[str, np.ndarray]:
+    """A row of the hub copy (numpy format or PIL images, either layout) as the loader's
+    arrays: rgb uint8, depth float32 mm, contact bool."""
+    out = {}
+    for name in ALL:
+        v = row[name]
+        a = np.stack([np.asarray(f) for f in v]) if isinstance(v, list) else np.asarray(v)
+        if name == "depth":
+            a = (a.view(np.int16).astype(np.float32) * np.float32(scale_mm)
+                 if a.dtype == np.uint16 else a.astype(np.float32, copy=False))
+        out[name] = a.astype(bool, copy=False) if name == "contact" else a
+    return out
+
+
+def rows_job(rows: Callable[[], Any], scale_mm: float) -> Callable[[], int]:
+    """Every row of a datasets reader made into the loader's arrays."""
+    def run() -> int:
+        n = 0
+        for r in rows():
+            hf_row_arrays(r, scale_mm)
+            n += 1
+        return n
+
+    return run
+
+
+def check_readers(view: View, order: Sequence[int], hf_rows: dict[str, Callable[[], Any]],
+                  scale_mm: float) -> None:
+    """Every reader gives the loader's arrays, sample by sample (before any timing)."""
+    ids = view.ids
+    want = {ids[i]: view.read([i], ALL) for i in order}
+    for name, rows in hf_rows.items():
+        seen = 0
+        for r in rows():
+            got = hf_row_arrays(r, scale_mm)
+            ref = want[str(r["sample_id"])]
+            for a in ALL:
+                if not np.array_equal(got[a], ref[a][0]):
+                    raise SystemExit(f"{name}: {a} of {r['sample_id']} differs from the loader")
+            seen += 1
+        if seen != len(order):
+            raise SystemExit(f"{name}: {seen} rows, the loader has {len(order)}")
+    x, t = view.to_torch("rgbd")[order[0]]
+    rgb = x["rgb"] if isinstance(x, dict) else x[..., :3, :, :]
+    ref = want[t["sample_id"]]
+    if isinstance(x, dict) and not np.array_equal(np.moveaxis(rgb.numpy(), -3, -1),
+                                                  ref["rgb"][0]):
+        raise SystemExit("to_torch differs from the loader")
+
+
+def best(jobs: dict[str, Callable[[], int]], n: int, repeats: int
+         ) -> dict[str, tuple[float, float]]:
+    """(samples/s, CPU ms per sample) of every job, best of repeats; the jobs take turns
+    within each repeat so that load from other processes falls on all of them alike."""
+    wall = dict.fromkeys(jobs, float("inf"))
+    cpu = dict.fromkeys(jobs, float("inf"))
+    for _ in range(repeats):
+        for key, job in jobs.items():
+            t0, c0 = time.perf_counter(), cpu_s()
+            got = job()
+            w, c = time.perf_counter() - t0, cpu_s() - c0
+            if got != n:
+                raise SystemExit(f"{key}: {got} samples, expected {n}")
+            wall[key], cpu[key] = min(wall[key], w), min(cpu[key], c)
+    return {k: (n / wall[k], 1e3 * cpu[k] / n) for k in jobs}
+
+
+# -- the earlier format comparison (--formats) --------------------------------------------
 
 
 def write_png_folder(view: View, root: Path) -> None:
@@ -89,7 +209,6 @@ def write_hf_parquet(png_root: Path, ids: Sequence[str], frames: int, path: Path
     """A datasets parquet file: sample_id, rgb and depth as sequences of Image() (PNG bytes)."""
     import datasets
 
-    datasets.disable_progress_bars()
     feats = datasets.Features({"sample_id": datasets.Value("string"),
                                "rgb": datasets.Sequence(datasets.Image()),
                                "depth": datasets.Sequence(datasets.Image())})
@@ -112,7 +231,6 @@ def hf_reader(path: Path, cache: Path) -> Reader:
     """Read row i of the parquet file through datasets (Image() decoding) as (rgb, depth mm)."""
     import datasets
 
-    datasets.disable_progress_bars()
     ds = datasets.Dataset.from_parquet(str(path), cache_dir=str(cache)).with_format("numpy")
 
     def read(i: int) -> tuple[np.ndarray, np.ndarray]:
@@ -124,157 +242,165 @@ def hf_reader(path: Path, cache: Path) -> Reader:
     return read
 
 
-def ours_reader(view: View) -> Reader:
-    """Read sequence i through the loader (rgb and depth only)."""
-
-    def read(i: int) -> tuple[np.ndarray, np.ndarray]:
-        a = view.read([i], ("rgb", "depth"))
-        return a["rgb"][0], a["depth"][0]
-
-    return read
-
-
-# -- timing -------------------------------------------------------------------------------
-
-
-def pass_seconds(read: Reader, order: Sequence[int]) -> float:
-    """Seconds to read every index in order."""
-    t0 = time.perf_counter()
-    for i in order:
-        read(i)
-    return time.perf_counter() - t0
-
-
-def loader_seconds(dataset: Any, workers: int, seed: int, batch: int = 4) -> float:
-    """Seconds of one shuffled DataLoader pass (batch of 4) over a torch dataset."""
-    import torch
-    from torch.utils.data import DataLoader
-
-    dl = DataLoader(dataset, batch_size=batch, shuffle=True,
-                    generator=torch.Generator().manual_seed(seed), num_workers=workers)
-    t0 = time.perf_counter()
-    for _ in dl:
-        pass
-    return time.perf_counter() - t0
-
-
-def best_rates(jobs: dict[Any, Callable[[int], float]], n: int, repeats: int) -> dict[Any, float]:
-    """Items/s of every job, best of repeats; the jobs take turns within each repeat so that
-    load from other processes falls on all of them alike."""
-    best = dict.fromkeys(jobs, float("inf"))
-    for r in range(repeats):
-        for key, job in jobs.items():
-            best[key] = min(best[key], job(r))
-    return {k: n / v for k, v in best.items()}
-
-
-class PngTorch:
-    """The PNG folder as a torch dataset of (rgbd tensor T x 4 x H x W, index)."""
-
-    def __init__(self, read: Reader, n: int) -> None:
-        self.read, self.n = read, n
-
-    def __len__(self) -> int:
-        return self.n
-
-    def __getitem__(self, i: int) -> tuple[Any, int]:
-        import torch
-
-        rgb, dep = self.read(i)
-        x = torch.from_numpy(rgb).movedim(-1, -3).to(torch.float32).div_(255.0)
-        return torch.cat([x, torch.from_numpy(dep).unsqueeze(-3)], dim=-3), i
-
-
-def check_same(readers: dict[str, Reader], n: int) -> None:
-    """Every reader returns the same arrays for every sequence."""
-    for i in range(n):
-        ref_rgb, ref_dep = readers["ours"](i)
-        for name, read in readers.items():
-            rgb, dep = read(i)
-            if not (np.array_equal(rgb, ref_rgb) and np.array_equal(dep, ref_dep)):
-                raise SystemExit(f"{name} differs from the loader at sequence {i}")
-
-
-def run(work: Path, sequences: int, size: tuple[int, int], repeats: int,
-        dataset: Path | None = None) -> str:
-    """Build (unless given a dataset), write the other formats, time every reader; returns the
-    markdown report."""
-    t0 = time.perf_counter()
-    ds_path = dataset or build_dataset(work, sequences, size)
-    t_build = time.perf_counter() - t0
-    view = vtsbench.load(ds_path).slip
+def formats_report(view: View, work: Path, order: Sequence[int], repeats: int) -> list[str]:
+    """The earlier comparison: the loader against a PNG folder and an Image() parquet."""
     n, frames = len(view), view.dataset.info.frames_per_sequence
     png_root = work / "png"
     write_png_folder(view, png_root)
     write_hf_parquet(png_root, view.ids, frames, work / "slip.parquet")
-    readers = {"ours": ours_reader(view), "png": png_reader(png_root, view.ids, frames),
-               "hf": hf_reader(work / "slip.parquet", work / "hf-cache-read")}
-    check_same(readers, n)
-    seq = list(range(n))
-    rnd = [int(i) for i in np.random.default_rng(0).permutation(n)]
-    jobs: dict[Any, Callable[[int], float]] = {}
-    for k, r in readers.items():
-        jobs[(k, "sequential")] = partial(lambda r, _: pass_seconds(r, seq), r)
-        jobs[(k, "random")] = partial(lambda r, _: pass_seconds(r, rnd), r)
-    rates = best_rates(jobs, n, repeats)
-    torch_sets = {"ours": view.to_torch("rgbd"),
-                  "ours-small": view.to_torch("rgbd", size=(240, 320), frames=4),
-                  "png": PngTorch(readers["png"], n)}
-    dl = best_rates({(k, w): partial(loader_seconds, d, w) for k, d in torch_sets.items()
-                     for w in (0, 2)}, n, repeats)
+    readers: dict[str, Reader] = {
+        "vtsbench loader (Zarr, zstd)": lambda i: tuple(view.read([i], ("rgb", "depth"))[a][0]
+                                                        for a in ("rgb", "depth")),
+        "PNG folder (OpenCV)": png_reader(png_root, view.ids, frames),
+        "datasets parquet, Image() PNG (PIL)": hf_reader(work / "slip.parquet",
+                                                         work / "hf-cache-read")}
+    for name, read in readers.items():
+        for i in order[:3]:
+            a, b = read(i), view.read([i], ("rgb", "depth"))
+            if not (np.array_equal(a[0], b["rgb"][0]) and np.array_equal(a[1], b["depth"][0])):
+                raise SystemExit(f"{name} differs from the loader at sequence {i}")
+    def job(read: Reader) -> Callable[[], int]:
+        return lambda: sum(1 for i in order if read(i) is not None)
 
-    sizes = {
-        "ours": du(ds_path / "data" / "slip.zarr"),
-        "png": du(png_root),
-        "hf": (work / "slip.parquet").stat().st_size,
+    jobs = {k: job(r) for k, r in readers.items()}
+    rates = best(jobs, n, repeats)
+    sizes = [folder_bytes(Path(view.dataset.location) / "data" / "slip.zarr"),
+             folder_bytes(png_root), (work / "slip.parquet").stat().st_size]
+    base = rates["vtsbench loader (Zarr, zstd)"][0]
+    lines = ["", "| format (rgb + depth, shuffled) | on disk (MB) | samples/s | loader / this |",
+             "|---|---:|---:|---:|"]
+    for (name, (rate, _c)), b in zip(rates.items(), sizes, strict=True):
+        lines.append(f"| {name} | {b / 1e6:.0f} | {rate:.1f} | {base / rate:.1f}x |")
+    return lines
+
+
+# -- the run ------------------------------------------------------------------------------
+
+
+def run(work: Path, a: argparse.Namespace, size: tuple[int, int]) -> str:
+    """Build (unless given a dataset), export, time every reader; returns the report."""
+    import datasets
+
+    from vtsbench.dataset.format.layout import HUB_DIR
+    from vtsbench.dataset.tools.hub import export_hf
+
+    datasets.disable_progress_bars()
+    load0 = os.getloadavg()[0]
+    if a.dataset:
+        root = work / "dataset"
+        shutil.copytree(a.dataset, root)
+        build_s = float("nan")
+    else:
+        root, build_s = make_dataset(work, a.sequences, 2, size, a.workers)
+    t0 = time.perf_counter()
+    export_hf(root, workers=a.workers)
+    export_s = time.perf_counter() - t0
+    ds = vtsbench.load(root)
+    view = ds.slip
+    n, scale = len(view), ds.info.depth_scale_mm
+    order = [int(i) for i in np.random.default_rng(0).permutation(n)]
+
+    cache = work / "cache"
+    t0, c0 = time.perf_counter(), cpu_s()
+    arrow = datasets.load_dataset(str(root), "slip_all", split="full", cache_dir=str(cache))
+    prepare_s, prepare_cpu = time.perf_counter() - t0, cpu_s() - c0
+    files = sorted((root / HUB_DIR / "slip").glob("*.parquet"))
+    parquet_b = sum(p.stat().st_size for p in files)
+    cache_b = sum(p.stat().st_size for p in cache.rglob("*.arrow"))
+    arrow_np = arrow.with_format("numpy")
+
+    def stream(fmt: str | None) -> Any:
+        s = datasets.load_dataset(str(root), "slip_all", split="full", streaming=True)
+        return s if fmt is None else s.with_format(fmt)
+
+    hf_rows: dict[str, Callable[[], Any]] = {
+        "`view.to_hf()`, streamed from Zarr": lambda: view.to_hf(),
+        "`load_dataset`, Arrow cache, no format (PIL images)": lambda: (arrow[i] for i in order),
+        "`load_dataset`, Arrow cache, `.with_format(\"numpy\")`":
+            lambda: (arrow_np[i] for i in order),
+        "`load_dataset(streaming=True)`, no format": lambda: stream(None),
+        "`load_dataset(streaming=True)`, `.with_format(\"numpy\")`": lambda: stream("numpy"),
     }
-    h, w = view.dataset.info.resolution
-    names = {"ours": "vtsbench loader (Zarr, zstd)", "png": "PNG folder (OpenCV)",
-             "hf": "datasets parquet, Image() (PIL)"}
-    lines = [
-        f"{n} slip sequences of {frames} x {h} x {w} x 3 RGB + depth; best of {repeats}"
-        + ("." if dataset else f"; dataset build {t_build:.0f} s."),
-        "",
-        "| reader | on disk (MB) | sequential (seq/s) | random order (seq/s) | "
-        "ours / this (sequential) |",
-        "|---|---:|---:|---:|---:|",
-    ]
-    for k in ("ours", "png", "hf"):
-        ratio = rates[("ours", "sequential")] / rates[(k, "sequential")]
-        lines.append(f"| {names[k]} | {sizes[k] / 1e6:.0f} | {rates[(k, 'sequential')]:.1f} | "
-                     f"{rates[(k, 'random')]:.1f} | {ratio:.1f}x |")
-    lines += ["", "| DataLoader, shuffled, batch 4 | tensors per sequence | 0 workers (seq/s) | "
-              "2 workers (seq/s) |", "|---|---|---:|---:|"]
-    shapes = {"ours": f"{frames} x 4 x {h} x {w}", "ours-small": "4 x 4 x 240 x 320",
-              "png": f"{frames} x 4 x {h} x {w}"}
-    labels = {"ours": names["ours"] + ', `to_torch("rgbd")`',
-              "ours-small": names["ours"] + ', `to_torch("rgbd", size=(240, 320), frames=4)`',
-              "png": names["png"] + ", same tensors as the first row"}
-    for k in ("ours", "ours-small", "png"):
-        lines.append(f"| {labels[k]} | {shapes[k]} | {dl[(k, 0)]:.1f} | {dl[(k, 2)]:.1f} |")
+    check_readers(view, order, hf_rows, scale)
+    base = {"rgb": "Zarr loader, rgb", "rgbd": "Zarr loader, rgb + depth",
+            "all": "Zarr loader, rgb + depth + contact"}
+    jobs: dict[str, Callable[[], int]] = {
+        base["rgb"]: zarr_job(view, order, ("rgb",)),
+        base["rgbd"]: zarr_job(view, order, ("rgb", "depth")),
+        base["all"]: zarr_job(view, order, ALL)}
+    torch_rows = []
+    specs = [(m, None) for m in ("rgb", "rgbd")] + [("rgbd", SMALL)]
+    for modality, sz in specs:
+        for dtype in ("uint8", "float32") if HAS_DTYPE else ("float32",):
+            for w, keep in ((0, False), (a.workers, False), (a.workers, True)):
+                if keep and modality == "rgb":
+                    continue
+                args = "".join([f'"{modality}"', "" if sz is None else f", size={sz}",
+                                ', dtype="float32"' if dtype == "float32" else ""])
+                key = (f"`to_torch({args})`, DataLoader, {w} workers"
+                       + (", persistent (a later epoch)" if keep else ""))
+                jobs[key] = torch_job(view, modality, sz, w, dtype, keep)
+                torch_rows.append((key, base[modality]))
+    for name, rows in hf_rows.items():
+        jobs[name] = rows_job(rows, scale)
+    rates = best(jobs, n, a.repeats)
+
+    h, w = ds.info.resolution
+    frames = ds.info.frames_per_sequence
+    lines = [f"{n} slip samples of {frames} x {h} x {w} (rgb, depth, contact), shuffled order; "
+             f"best of {a.repeats}; load average {load0:.1f} at the start.", "",
+             "| reader | samples/s | / Zarr loader | CPU ms per sample |", "|---|---:|---:|---:|"]
+
+    def row(name: str, base: str) -> str:
+        rate, cpu = rates[name]
+        cpu_text = "n/a" if "persistent" in name else f"{cpu:.0f}"  # workers not yet ended
+        return f"| {name} | {rate:.1f} | {rate / rates[base][0]:.2f}x | {cpu_text} |"
+
+    lines += [row(b, b) for b in base.values()]
+    lines += [row(k, b) for k, b in torch_rows]
+    lines += [row(k, base["all"]) for k in hf_rows]
+    lines += ["", "Ratios: each torch row to the Zarr loader reading the same arrays, the "
+              "others to it reading rgb + depth + contact. DataLoader batch 4; an rgbd sample at "
+              f"{h}x{w} is "
+              f"{frames * h * w * (3 + 4) / 1e6:.1f} MB as uint8 rgb + float32 mm depth, "
+              f"{frames * h * w * 16 / 1e6:.1f} MB as float32.", "",
+              "| Hugging Face copy | value |", "|---|---:|",
+              f"| `vtsbench build` (s) | {build_s:.1f} |",
+              f"| `vtsbench export-hf` (s) | {export_s:.1f} |",
+              f"| first `load_dataset` (slip_all): Arrow cache build (s, wall / CPU) | "
+              f"{prepare_s:.2f} / {prepare_cpu:.2f} |",
+              f"| parquet it reads (MB) | {parquet_b / 1e6:.1f} |",
+              f"| Arrow cache it writes (MB) | {cache_b / 1e6:.1f} |",
+              f"| cache / parquet | {cache_b / parquet_b:.3f} |",
+              f"| Zarr arrays, `data/slip.zarr` (MB) | "
+              f"{folder_bytes(root / 'data' / 'slip.zarr') / 1e6:.1f} |"]
+    for col, b in sorted(column_bytes(root / HUB_DIR / "slip").items(), key=lambda kv: -kv[1]):
+        if b > 1e5:
+            lines.append(f"| parquet column `{col}` (MB) | {b / 1e6:.1f} |")
+    if a.formats:
+        lines += formats_report(view, work, order, a.repeats)
     lines += ["", f"Machine: {machine()}."]
     return "\n".join(lines)
 
 
-def du(path: Path) -> int:
-    """Bytes of the files under path."""
-    return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sequences", type=int, default=24)
+    ap.add_argument("--sequences", type=int, default=36)
     ap.add_argument("--size", default="480x640")
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--workers", type=int, default=2,
+                    help="DataLoader workers, and the build's and export's workers.")
     ap.add_argument("--workdir", type=Path, default=None,
                     help="Folder for the files (default: a temporary one, removed at the end).")
     ap.add_argument("--dataset", type=Path, default=None,
-                    help="Use this built dataset's slip samples instead of building one.")
-    args = ap.parse_args()
-    size = tuple(int(v) for v in args.size.lower().split("x"))
-    work = Path(tempfile.mkdtemp(prefix="vtsbench-loader-", dir=args.workdir))
+                    help="Use a copy of this built dataset instead of building one.")
+    ap.add_argument("--formats", action="store_true",
+                    help="Also compare with a PNG folder and a parquet of Image() PNGs.")
+    a = ap.parse_args()
+    size = tuple(int(v) for v in a.size.lower().split("x"))
+    work = Path(tempfile.mkdtemp(prefix="vtsbench-loader-", dir=a.workdir))
     try:
-        print(run(work, args.sequences, (size[0], size[1]), args.repeats, args.dataset))
+        print(run(work, a, (size[0], size[1])))
     finally:
         shutil.rmtree(work, ignore_errors=True)
 

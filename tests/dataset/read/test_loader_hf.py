@@ -52,6 +52,18 @@ def test_to_hf_copy(vts_dataset: Path, tmp_path: Path, monkeypatch: pytest.Monke
     assert list(Path(tmp_path).rglob("*.arrow"))
 
 
+def test_hub_arrays_reads_to_hf_rows_as_the_loader(vts_dataset: Path) -> None:
+    """hub_arrays, the reader of the Hugging Face copy's rows, gives the loader's arrays of a
+    to_hf row too (depth already in mm there), so one reading code serves both."""
+    from vtsbench.dataset.read.hf import hub_arrays
+
+    view = vtsbench.load(vts_dataset).slip[:2]
+    for i, row in enumerate(view.to_hf()):
+        got, s = hub_arrays(row), view[i]
+        for name in ("rgb", "depth", "contact"):
+            assert got[name].dtype == s[name].dtype and np.array_equal(got[name], s[name])
+
+
 def test_to_hf_some_arrays_and_empty(vts_dataset: Path, tmp_path: Path) -> None:
     ds = vtsbench.load(vts_dataset)
     hf = ds.slip[:2].to_hf(arrays=("depth",), copy=True, cache_dir=tmp_path)

@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 
 import vtsbench
 from vtsbench.cli import app
+from vtsbench.dataset.read.hf import hub_arrays
 from vtsbench.dataset.tools.hub_layout import HUB_DIR, config_name, split_name
 from vtsbench.dataset.tools.verify import verify
 from vtsbench.labels import DIRECTION_NAMES, STATES
@@ -95,19 +96,26 @@ def test_parquet_files_have_small_row_groups(hub_dataset: Path) -> None:
 
 def _check_rows(rows: list[dict], ds: vtsbench.VtsDataset, kind: str) -> None:
     """Rows read by datasets against the loader: labels, exact pixels, depth and contact."""
+    import io
+
+    from PIL import Image
+
     view = ds.view(kind)
     for r in rows:
         s = view.by_id(r["sample_id"])
-        rgb, contact = (np.stack([np.asarray(im) for im in r[n]]) if kind == "slip"
-                        else np.asarray(r[n]) for n in ("rgb", "contact"))
-        assert rgb.dtype == np.uint8 and np.array_equal(rgb, s["rgb"])
-        depth = np.asarray(r["depth"], dtype=np.float32)
-        assert np.array_equal(depth, s["depth"])  # lossless: the loader's float32 mm
-        assert contact.dtype == bool and np.array_equal(contact, s["contact"])
+        frames = r["rgb"] if kind == "slip" else [r["rgb"]]
+        assert all(im.format == "TIFF" and im.mode == "RGB" for im in frames)
+        got = hub_arrays(r, ds.info.depth_scale_mm)
+        assert got["rgb"].dtype == np.uint8 and np.array_equal(got["rgb"], s["rgb"])
+        assert got["depth"].dtype == np.float32
+        assert np.array_equal(got["depth"], s["depth"])  # lossless: the loader's float32 mm
+        assert (s["depth"] < 0).any()  # negative counts survive the uint16 images too
+        assert got["contact"].dtype == bool and np.array_equal(got["contact"], s["contact"])
         assert r["object"] == s["class_idx"]
-        preview = r["depth_preview"]
-        frames = preview if kind == "slip" else [preview]
-        assert all(im.mode == "RGB" and im.size == rgb.shape[-2:-4:-1] for im in frames)
+        preview = r["depth_preview"]  # left encoded: {"bytes": PNG, "path": None}
+        previews = [Image.open(io.BytesIO(p["bytes"])) for p in
+                    (preview if kind == "slip" else [preview])]
+        assert all(im.mode == "RGB" and im.size == got["rgb"].shape[-2:-4:-1] for im in previews)
         if kind == "slip":
             assert r["state"] == s["state_idx"] and r["direction"] == s["direction"]
 
@@ -133,10 +141,111 @@ def test_load_dataset_every_config(hub_dataset: Path, tmp_path: Path, offline: N
     whole = datasets.load_dataset(str(hub_dataset), "slip_all", split="full",
                                   cache_dir=str(tmp_path))
     _check_rows(list(whole), ds, "slip")  # every slip sample, pixel for pixel
-    rows = whole.with_format("numpy")
+    rows = whole.with_format("numpy")  # the fast format: arrays, images not widened
     s = ds.slip.by_id(rows[0]["sample_id"])
-    for name, dtype in (("rgb", np.uint8), ("depth", np.float32), ("contact", bool)):
-        assert rows[0][name].dtype == dtype and np.array_equal(rows[0][name], s[name])
+    for name, dtype in (("rgb", np.uint8), ("depth", np.uint16), ("contact", bool)):
+        assert rows[0][name].dtype == dtype and rows[0][name].shape == s[name].shape
+    assert np.array_equal(rows[0]["rgb"], s["rgb"])
+    assert np.array_equal(rows[0]["contact"], s["contact"])
+    mm = rows[0]["depth"].view(np.int16).astype(np.float32) * np.float32(0.001)  # the card's
+    assert np.array_equal(mm, s["depth"])
+
+
+def test_arrow_cache_no_larger_than_the_parquet(hub_dataset: Path, tmp_path: Path,
+                                                offline: None) -> None:
+    """load_dataset's Arrow cache holds the encoded images, not pixels: no larger than the
+    parquet files it was built from (layout 1 expanded depth to 9x its parquet bytes)."""
+    import datasets
+
+    meta = {c["config_name"]: c for c in card_yaml(hub_dataset)["configs"]}
+    for name in ("slip_all", "static_all"):
+        files = meta[name]["data_files"][0]["path"]
+        parquet = sum((hub_dataset / f).stat().st_size for f in files)
+        cache = tmp_path / name
+        d = datasets.load_dataset(str(hub_dataset), name, split="full", cache_dir=str(cache))
+        arrow = sum(p.stat().st_size for p in cache.rglob("*.arrow"))
+        assert d.num_rows and parquet / 2 < arrow <= parquet, (name, arrow, parquet)
+
+
+def test_layout_version_and_uncompressed_images(hub_dataset: Path) -> None:
+    """The parquet files say their layout version and depth scale; image columns are stored
+    as they are (already compressed), the labels with zstd."""
+    import json
+
+    import pyarrow.parquet as pq
+
+    from vtsbench.dataset.tools.hub_rows import HUB_VERSION, IMAGE_COLUMNS
+
+    for p in (hub_dataset / HUB_DIR).rglob("*.parquet"):
+        f = pq.ParquetFile(p)
+        doc = json.loads(f.schema_arrow.metadata[b"vtsbench"])
+        assert doc == {"hub_version": HUB_VERSION, "depth_scale_mm": 0.001}
+        assert f.schema_arrow.field("depth").metadata[b"units"] == b"count"
+        rg = f.metadata.row_group(0)
+        for c in range(rg.num_columns):
+            col = rg.column(c)
+            top = col.path_in_schema.split(".")[0]
+            want = "UNCOMPRESSED" if top in IMAGE_COLUMNS else "ZSTD"
+            assert col.compression == want, (col.path_in_schema, col.compression)
+    assert f"Layout version\n{HUB_VERSION}" in (hub_dataset / "README.md").read_text()
+
+
+def test_tiffs_read_back_and_a_pillow_without_zstd_is_one_line(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The TIFFs written by hand decode with Pillow, exactly and the same bytes each time; a
+    Pillow that cannot read them stops export-hf in one line, before anything is written."""
+    import io
+
+    from PIL import Image
+
+    from vtsbench.dataset.tools.hub_rows import check_codecs, tiff
+    from vtsbench.errors import VtsError
+
+    rng = np.random.default_rng(0)
+    for a, predictor in ((rng.integers(0, 256, (5, 7, 3), dtype=np.uint8), True),
+                         (rng.integers(0, 2**16, (5, 7), dtype=np.uint16), False),
+                         (rng.integers(0, 2**16, (1, 1), dtype=np.uint16), True)):
+        data = tiff(a, predictor)
+        assert data == tiff(a, predictor) and data[:4] == b"II*\x00"
+        assert np.array_equal(np.asarray(Image.open(io.BytesIO(data))), a)
+    check_codecs()
+
+    def no_zstd(*_a: object, **_k: object) -> None:
+        raise OSError("decoder zstd not available")
+
+    monkeypatch.setattr(Image, "open", no_zstd)
+    with pytest.raises(VtsError, match="cannot read them") as e:
+        check_codecs()
+    assert "\n" not in str(e.value) and "pip install" in str(e.value)
+
+
+@pytest.mark.parametrize("scale", [0.001, 0.002, 0.00037])
+def test_stored_counts_are_exact_for_every_count(scale: float) -> None:
+    """The export writes the stored counts back from the loader's mm, at any depth scale."""
+    from vtsbench.dataset.format.arrays import depth_to_mm
+    from vtsbench.dataset.tools.hub_rows import stored_counts
+
+    counts = np.arange(-32768, 32768).astype(np.int16)
+    mm = depth_to_mm(counts) * np.float32(scale / 0.001)  # as the loader scales it
+    assert np.array_equal(stored_counts(mm, scale), counts)
+    assert np.array_equal(hub_arrays({"depth": counts.view(np.uint16)}, scale)["depth"], mm)
+
+
+def test_hub_arrays_reads_both_layouts() -> None:
+    """hub_arrays: counts as uint16 bits (layout 2) or mm (layout 1), PIL or numpy rows."""
+    from PIL import Image
+
+    counts = np.array([[[-5, 0], [7, 32767]]], np.int16)
+    mm = counts.astype(np.float32) * np.float32(0.001)
+    rgb = np.arange(12, dtype=np.uint8).reshape(1, 2, 2, 3)
+    v2 = {"rgb": [Image.fromarray(rgb[0])], "depth": [Image.fromarray(counts[0].view(np.uint16))],
+          "contact": np.ones((1, 2, 2), bool)}
+    got = hub_arrays(v2)
+    assert np.array_equal(got["rgb"], rgb) and np.array_equal(got["depth"], mm)
+    assert got["depth"].dtype == np.float32 and got["contact"].dtype == bool
+    assert np.array_equal(hub_arrays({"depth": mm.tolist()})["depth"], mm)  # layout 1: mm
+    assert np.array_equal(hub_arrays({"depth": counts.view(np.uint16)}, 0.002)["depth"],
+                          mm * np.float32(2))
 
 
 def test_streaming(hub_dataset: Path, offline: None) -> None:
@@ -169,6 +278,7 @@ def test_rgb_only_dataset_exports(tmp_path: Path, offline: None) -> None:
     assert "depth" not in d.column_names and "depth_preview" not in d.column_names
     s = vtsbench.load(tmp_path / "ds").static.by_id(d[0]["sample_id"])
     assert np.array_equal(np.asarray(d[0]["rgb"]), s["rgb"])
+    assert set(hub_arrays(d.with_format("numpy")[0])) == {"rgb"}
     assert verify(tmp_path / "ds").ok
 
 

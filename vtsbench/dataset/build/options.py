@@ -35,11 +35,20 @@ class BuildOptions:
 
 def check_options(opts: BuildOptions) -> None:
     """Every parameter in its range (vtsbench/limits.py), as one line naming the option."""
-    from ... import limits as lim
-    from ...limits import check_range, check_text
+    from ...limits import (
+        MAX_FRAMES,
+        MAX_PATH_TEXT,
+        MAX_SEED,
+        MAX_SHARD_MB,
+        MAX_VERSION,
+        MAX_WORKERS,
+        MIN_SHARD_MB,
+        check_range,
+        check_text,
+    )
 
-    check_range("--frames", opts.frames, 1, lim.MAX_FRAMES)
-    check_range("--workers", opts.workers, 1, lim.MAX_WORKERS)
+    check_range("--frames", opts.frames, 1, MAX_FRAMES)
+    check_range("--workers", opts.workers, 1, MAX_WORKERS)
     if opts.solver not in SOLVERS:
         raise VtsError(f"--solver must be one of {', '.join(SOLVERS)}, got {opts.solver!r}")
     if not opts.depth and opts.calibration is not None:
@@ -49,10 +58,10 @@ def check_options(opts: BuildOptions) -> None:
                        f"{opts.compression_level}")
     if not opts.shard_mb > 0:
         raise VtsError(f"--shard-mb must be positive, got {opts.shard_mb}")
-    check_range("--shard-mb", opts.shard_mb, lim.MIN_SHARD_MB, lim.MAX_SHARD_MB)
-    check_range("--seed", opts.seed, 0, lim.MAX_SEED)
-    check_text("--scheduler", opts.scheduler, lim.MAX_PATH_TEXT)
-    check_text("--dataset-version", opts.version, lim.MAX_VERSION)
+    check_range("--shard-mb", opts.shard_mb, MIN_SHARD_MB, MAX_SHARD_MB)
+    check_range("--seed", opts.seed, 0, MAX_SEED)
+    check_text("--scheduler", opts.scheduler, MAX_PATH_TEXT)
+    check_text("--dataset-version", opts.version, MAX_VERSION)
     if not _semver(opts.version):
         raise VtsError(f"--dataset-version must be a semantic version such as 1.0.0, got "
                        f"{opts.version!r}")

@@ -25,6 +25,8 @@ FINGERPRINT_VERSION = 2
 #: Build state inside the partial folder (shard markers); parked beside it during the final
 #: rename (commit) and deleted once the rename has happened.
 WORK = ".build"
+#: The state an episode writer (build/writer.py) keeps in WORK instead of shard markers.
+WRITER_STATE = "writer.json"
 
 
 class SourceStats:
@@ -226,6 +228,9 @@ def recover(out: Path, stage: Path | None = None, work: str = WORK) -> None:
 def remove_stale(stage: Path, plan: Plan) -> None:
     """Delete shard files and markers the plan has no place for (and the arrays it has none
     for), and left-over temporaries."""
+    if (stage / WORK / WRITER_STATE).exists():  # never delete a writer's saved episodes
+        raise VtsError("holds a partial dataset of episodes (vtsbench.create), not a build: "
+                       "finish it with vtsbench.create(..., resume=True) or delete it", stage)
     for kind in KINDS:
         lay = plan.layouts[kind]
         group = stage / group_path(kind)

@@ -20,6 +20,9 @@ FORMAT = "vtsbench.dataset"
 #: 1.1: info.json carries info_sha256, the sha256 of its own text (see `DatasetInfo.to_json`),
 #: and the depth array CF attributes (scale_factor, units) that xarray and other readers decode.
 FORMAT_VERSION = "1.1"
+#: 1.2: episodes (continuous takes stored once, format/episodes.py), counted under `episodes`.
+#: Written only by a dataset that holds episodes, so builds without them keep their bytes.
+EPISODES_FORMAT_VERSION = "1.2"
 DEFAULT_UNITS: dict[str, str] = {
     "depth": "mm",
     "length": "mm",
@@ -91,6 +94,27 @@ class Counts:
 
 
 @dataclass(frozen=True)
+class EpisodeCounts:
+    """Episodes (format 1.2): how many, their frames, episodes per object and session, frames
+    per state ('unknown' for null) and frames missing from the takes (timestamp gaps)."""
+
+    episodes: int = 0
+    frames: int = 0
+    objects: dict[str, int] = field(default_factory=dict)
+    sessions: dict[str, int] = field(default_factory=dict)
+    states: dict[str, int] = field(default_factory=dict)
+    dropped_frames: int = 0
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> EpisodeCounts:
+        return cls(int(d["episodes"]), int(d["frames"]), dict(d["objects"]),
+                   dict(d["sessions"]), dict(d["states"]), int(d["dropped_frames"]))
+
+
+@dataclass(frozen=True)
 class ZarrSettings:
     """How the arrays are stored: compressor, its level, whole samples per shard per kind."""
 
@@ -142,6 +166,8 @@ class DatasetInfo:
     depth_scale_mm: float = DEPTH_SCALE_MM
     depth_dtype: str = DEPTH_DTYPE
     format_version: str = FORMAT_VERSION
+    #: format 1.2, a dataset holding episodes: their counts (None, and no key, otherwise)
+    episodes: EpisodeCounts | None = None
     #: as read from the file (to_json computes it afresh)
     info_sha256: str = field(default="", compare=False)
 
@@ -162,7 +188,7 @@ class DatasetInfo:
         return "depth" in self.arrays
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        doc = {
             "format": FORMAT, "format_version": self.format_version,
             "dataset_version": self.dataset_version, "name": self.name,
             "created_by": self.created_by, "vtsbench_version": self.vtsbench_version,
@@ -176,6 +202,9 @@ class DatasetInfo:
             "splits": dict(self.splits), "files": dict(sorted(self.files.items())),
             "dataset_sha256": self.dataset_sha256, "build": dict(self.build),
         }
+        if self.episodes is not None:  # format 1.2 only: other datasets keep their bytes
+            doc["episodes"] = self.episodes.to_dict()
+        return doc
 
     def to_json(self) -> str:
         """The text of meta/info.json. From format 1.1 its last key, info_sha256, is the sha256
@@ -205,7 +234,9 @@ class DatasetInfo:
             splits=dict(d["splits"]), files=dict(d["files"]),
             dataset_sha256=d["dataset_sha256"], build=dict(d["build"]), units=dict(d["units"]),
             depth_scale_mm=float(d["depth_scale_mm"]), depth_dtype=d["depth_dtype"],
-            format_version=d["format_version"], info_sha256=d.get("info_sha256", ""))
+            format_version=d["format_version"], info_sha256=d.get("info_sha256", ""),
+            episodes=None if d.get("episodes") is None else EpisodeCounts.from_dict(
+                d["episodes"]))
 
 
 def format_minor(version: str) -> int:
@@ -256,6 +287,12 @@ def consistency_problems(info: DatasetInfo) -> list[str]:
         total = getattr(info.counts, kind).samples if hasattr(info.counts, kind) else n
         if total != n:
             out.append(f"counts.{kind}.total {total} contradicts shapes.{kind} ({n} samples)")
+    ep, frames = info.episodes, info.shapes.get("episodes", {}).get("rgb", (None,))[0]
+    if (ep is None) != (frames is None) or (ep is not None and ep.frames != frames):
+        out.append(f"episodes {'absent' if ep is None else f'{ep.frames} frames'} contradicts "
+                   f"shapes.episodes ({'absent' if frames is None else f'{frames} frames'})")
+    if ep is not None and format_minor(info.format_version) < 2:
+        out.append(f"episodes need format 1.2 or later, info.json says {info.format_version}")
     return out
 
 

@@ -4,7 +4,9 @@ A dataset folder holds `meta/info.json` (versions, shapes, counts, checksums: fo
 `meta/build_report.json`, `meta/splits/<name>.json` (one per split scheme), the indexes
 `index/<kind>.parquet` (format/index.py), the Zarr v3 arrays `data/<kind>.zarr/`
 (format/arrays.py), the preview `preview/<kind>.parquet`, the card `README.md` and, after
-`vtsbench export-hf`, the Hugging Face copy under `hf/`. Paths are relative, '/'-separated.
+`vtsbench export-hf`, the Hugging Face copy under `hf/`. Format 1.2 adds episodes (continuous
+takes stored once, format/episodes.py): the frames store `data/episodes.zarr` and the indexes
+`index/episodes.parquet` and `index/frames.parquet`. Paths are relative, '/'-separated.
 """
 
 from __future__ import annotations
@@ -59,3 +61,14 @@ def split_path(name: str) -> str:
 def preview_path(kind: str) -> str:
     """`preview/<kind>.parquet`."""
     return f"{PREVIEW_DIR}/{kind}.parquet"
+
+
+#: Episodes (format 1.2): continuous takes stored once, every frame of every episode in one
+#: store, windows chosen when reading (format/episodes.py).
+EPISODES = "episodes"
+#: `data/episodes.zarr`: every frame of every episode, in episode order, one frame per chunk.
+EPISODES_GROUP = group_path(EPISODES)
+#: `index/episodes.parquet`: one row per episode.
+EPISODES_INDEX = index_path(EPISODES)
+#: `index/frames.parquet`: one row per frame (timestamp and labels), in store order.
+FRAMES_INDEX = index_path("frames")

@@ -6,17 +6,22 @@ depth float32 mm, contact bool) with the index columns. `copy=True` writes a `da
 instead (Arrow files under `cache_dir`, a few rows per write because a slip row holds
 megabytes); `.with_format("numpy", dtype=None)` reads it back without datasets' widening of
 integer arrays to int64.
+
+`hub_arrays(row)` is the other direction: a row of the dataset's own Hugging Face copy
+(`vtsbench export-hf`, read by `datasets.load_dataset`) as the loader's arrays, depth in mm.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import datasets
+import numpy as np
 
-from ..format.layout import DECODED_DTYPES
+from ..format.arrays import depth_to_mm
+from ..format.layout import DECODED_DTYPES, DEPTH_SCALE_MM
 from .arrays import ITER_BYTES
 
 if TYPE_CHECKING:
@@ -72,3 +77,24 @@ def to_hf(view: View, arrays: Sequence[str] | None = None, *, copy: bool = False
     return datasets.Dataset.from_generator(
         _rows, features=feats, writer_batch_size=writer_batch_size,
         cache_dir=None if cache_dir is None else str(cache_dir), gen_kwargs=kwargs)
+
+
+def hub_arrays(row: Mapping[str, Any], depth_scale_mm: float = DEPTH_SCALE_MM
+               ) -> dict[str, np.ndarray]:
+    """The arrays of a row of the Hugging Face copy as the loader gives them: rgb uint8
+    ((T,) H, W, 3), depth float32 mm (the stored int16 counts x depth_scale_mm, the scale in
+    info.json and the card: equal to the loader's, bit for bit), contact bool; from a row in
+    the numpy format or with PIL images (the default format), of layout version 2 (depth as
+    16-bit images of the counts) or 1 (depth already in mm). Only the arrays the row has."""
+    out = {}
+    for name in ("rgb", "depth", "contact"):
+        if name not in row:
+            continue
+        v = row[name]
+        a = np.stack([np.asarray(f) for f in v]) if isinstance(v, list | tuple) else np.asarray(v)
+        if name == "depth" and a.dtype == np.uint16:  # the int16 counts' bits
+            a = depth_to_mm(a.view(np.int16))
+            if depth_scale_mm != DEPTH_SCALE_MM:
+                a *= np.float32(depth_scale_mm / DEPTH_SCALE_MM)
+        out[name] = a.astype(DECODED_DTYPES[name], copy=False)
+    return out

@@ -24,6 +24,7 @@ from ..format.info import DatasetInfo, load_info
 from ..format.layout import (
     DECODED_DTYPES,
     DEPTH_SCALE_MM,
+    EPISODES,
     INDEX_DIR,
     INFO_PATH,
     KINDS,
@@ -42,6 +43,8 @@ from .view import View
 
 if TYPE_CHECKING:
     import pyarrow as pa
+
+    from .episodes import Episodes
 
 class KindStore:
     """One kind's index (pyarrow Table) and its Zarr arrays, opened lazily once per process."""
@@ -86,7 +89,7 @@ class KindStore:
             self._pid, self._group, self._arrays = os.getpid(), None, {}
         if name not in self._arrays:
             if self._group is None:
-                group = store.open_group(self.loc.url, self.kind, self.loc.storage_options)
+                group = _open_group(self.loc.url, self.kind, self.loc.storage_options)
                 if not self.metadata_checked:
                     self._agrees()
                     self.metadata_checked = True
@@ -193,6 +196,15 @@ class KindStore:
             out[n] = data
         return out
 
+
+
+def _open_group(url: str, kind: str, storage_options: dict[str, Any] | None) -> Any:
+    """A kind's Zarr group, or the frames store of the episodes (format 1.2)."""
+    if kind == EPISODES:
+        from .episodes import open_frames_group
+
+        return open_frames_group(url, storage_options)
+    return store.open_group(url, kind, storage_options)
 
 
 def _read_runs(arr: Any, runs: list[tuple[int, int]], n: int,
@@ -323,6 +335,16 @@ class VtsDataset:
         split = self.split_file(name)
         return View(self, split.kind, self._part_positions(split, part))
 
+    @property
+    def episodes(self) -> Episodes:
+        """The continuous takes stored once (format 1.2) and their windows, chosen when
+        reading (`windows(...)`); none (length 0) in a dataset without episodes."""
+        if "_episodes" not in self.__dict__:
+            from .episodes import open_episodes
+
+            self._episodes = open_episodes(self.loc, self.info, KindStore)
+        return self._episodes
+
     def by_id(self, sample_id: str, arrays: Sequence[str] | None = None) -> dict[str, Any]:
         """A sample of either kind by id."""
         for kind in KINDS:
@@ -337,11 +359,12 @@ def load(path_or_url: str | os.PathLike, *,
     """Open a vtsbench dataset from a folder or an fsspec URL (http://, s3://, memory://, ...).
 
     Reads meta/info.json (refusing an unknown format major version) and the two indexes
-    (`format.index.read_index`, fetched whole from a URL), and checks them as `vtsbench
-    verify` does; split files are checked when first used (`splits.leaks.split_problems`), the
-    Zarr metadata on the first read (`format.arrays.zarr_problems`). A split that leaks (a
-    sample in two parts, or parts sharing an object, session or location their rules keep
-    apart) is refused unless allow_leaks=True. storage_options go to fsspec for URLs.
+    (`format.index.read_index`, fetched whole from a URL), with format 1.2 the episode and frame
+    indexes (`ds.episodes`), and checks them as `vtsbench verify` does; split files are checked
+    when first used (`splits.leaks.split_problems`), the Zarr metadata on the first read
+    (`format.arrays.zarr_problems`). A split that leaks (a sample in two parts, or parts
+    sharing an object, session or location their rules keep apart) is refused unless
+    allow_leaks=True. storage_options go to fsspec for URLs.
     """
     loc = Location(path_or_url, storage_options)
     if not loc.remote and not Path(loc.url).is_dir():
@@ -358,4 +381,7 @@ def load(path_or_url: str | os.PathLike, *,
     bad = counts_problems(info, tables)
     if bad:
         raise VtsError(bad[0], loc.path(INFO_PATH))
-    return VtsDataset(loc, info, tables, allow_leaks)
+    ds = VtsDataset(loc, info, tables, allow_leaks)
+    if info.episodes is not None:
+        ds.episodes  # noqa: B018 (read and checked now, as the indexes are)
+    return ds

@@ -1,8 +1,13 @@
 """`View.to_torch`: a torch Dataset of (tensor, target dict) over a view, for DataLoader workers.
 
-Items read only the arrays their modality needs; a batch (DataLoader's `__getitems__`) is read
-with one zarr call per contiguous run of rows. The Zarr arrays are opened lazily in each worker
-process, never pickled. This module imports torch: import it only where torch is wanted.
+Frames come as uint8, resized in the worker with OpenCV (INTER_AREA) before any conversion, so
+a worker moves a quarter of the bytes of float32 rgb through the DataLoader's shared memory and
+makes no float copy; the model converts (`as_float`, or `x.float().div_(255)`), on its device.
+`dtype="float32"` gives the float tensors of earlier versions bit for bit (rgb in [0, 1], torch's
+antialiased bilinear resize). A batch (DataLoader's `__getitems__`) reads its rows in row order,
+one store read per run of consecutive rows, and resizes and converts each run in one pass. The
+Zarr arrays are opened lazily in each worker process, never pickled. This module imports torch:
+import it only where torch is wanted.
 """
 
 from __future__ import annotations
@@ -24,6 +29,8 @@ if TYPE_CHECKING:
 
 MODALITIES = ("rgb", "depth", "rgbd")
 TARGET_ARRAYS = ("depth", "contact")
+#: Output types: uint8 frames (the default) or the float32 tensors of earlier versions.
+DTYPES = ("uint8", "float32")
 
 
 def frame_numbers(t: int, k: int) -> np.ndarray:
@@ -50,7 +57,7 @@ def _check_size(size: Any) -> tuple[int, int] | None:
 
 def resize(x: torch.Tensor, size: tuple[int, int], mode: str = "bilinear") -> torch.Tensor:
     """Resize (..., C, H, W) to size: bilinear (antialiased) for images, nearest for masks;
-    uint8 stays uint8 (rounded)."""
+    uint8 stays uint8 (rounded). The resize of dtype="float32"."""
     if tuple(x.shape[-2:]) == size:
         return x
     lead = x.shape[:-3]
@@ -63,13 +70,61 @@ def resize(x: torch.Tensor, size: tuple[int, int], mode: str = "bilinear") -> to
     return out.reshape(*lead, *out.shape[-3:])
 
 
+def resize_frames(a: np.ndarray, size: tuple[int, int], channels: bool = False) -> np.ndarray:
+    """Frames (..., H, W) or (..., H, W, C) with `channels` resized to size = (h, w) with
+    OpenCV, each written into one output buffer: INTER_AREA (pixel-area averaging, the
+    resampling for shrinking) for uint8 and float frames, nearest for bool masks."""
+    import cv2
+
+    h, w = size
+    frame_dims = 3 if channels else 2
+    if tuple(a.shape[-frame_dims:][:2]) == (h, w):
+        return a
+    lead = a.shape[:-frame_dims]
+    src = a.view(np.uint8) if a.dtype == bool else a
+    flat = src.reshape(-1, *src.shape[-frame_dims:])
+    out = np.empty((len(flat), h, w, *flat.shape[3:]), src.dtype)
+    how = cv2.INTER_NEAREST if a.dtype == bool else cv2.INTER_AREA
+    for k in range(len(flat)):
+        cv2.resize(flat[k], (w, h), dst=out[k], interpolation=how)
+    out = out.reshape(*lead, *out.shape[1:])
+    return out.view(bool) if a.dtype == bool else out
+
+
+def channels_first(a: np.ndarray) -> np.ndarray:
+    """(..., H, W, C) uint8 frames as a new contiguous (..., C, H, W) array, split plane by plane
+    with OpenCV (SIMD: about 3x numpy's transposing copy and 5x torch's)."""
+    import cv2
+
+    out = np.empty((*a.shape[:-3], a.shape[-1], *a.shape[-3:-1]), a.dtype)
+    src, dst = a.reshape(-1, *a.shape[-3:]), out.reshape(-1, *out.shape[-3:])
+    for k in range(len(src)):
+        cv2.split(src[k], list(dst[k]))
+    return out
+
+
+def as_float(x: Any, device: Any = None) -> torch.Tensor:
+    """The float32 input of a uint8 item or batch, on `device`: rgb / 255 in [0, 1], depth in
+    mm, rgbd (a dict) as 4 channels (rgb, depth): the model's first step, done where the batch
+    arrives (on a GPU it costs nothing next to the copy)."""
+    if isinstance(x, dict):
+        rgb, depth = as_float(x["rgb"], device), as_float(x["depth"], device)
+        return torch.cat([rgb, depth], dim=-3)
+    x = x.to(device, non_blocking=True) if device is not None else x
+    return x.float().div_(255) if x.dtype == torch.uint8 else x.float()
+
+
 class TorchView(Dataset):
     """(tensor, target) items of a view.
 
-    tensor: rgb float32 in [0, 1] as C x H x W, depth float32 mm as one channel, rgbd both
-    (4 channels); slip items are T x C x H x W. target: sample_id, class_idx, press_depth_mm
-    (NaN when unknown) and for slip state_idx, direction (-1 when none) and motion_mm (2,),
-    plus the arrays named in `targets` ("depth" in mm, "contact" bool) as (T x) H x W.
+    dtype "uint8" (default): rgb uint8 as C x H x W, depth float32 mm as one channel, rgbd a
+    dict {"rgb", "depth"} of the two (no float copy of the frames is made); `size` resizes in
+    the worker with OpenCV INTER_AREA before any conversion (masks: nearest). dtype "float32":
+    rgb float32 in [0, 1], depth mm, rgbd one 4-channel tensor, resized with torch's antialiased
+    bilinear (the tensors of earlier versions, bit for bit). Slip items are T x C x H x W.
+    target: sample_id, class_idx, press_depth_mm (NaN when unknown) and for slip state_idx,
+    direction (-1 when none) and motion_mm (2,), plus the arrays named in `targets` ("depth"
+    in mm, "contact" bool) as (T x) H x W.
 
     Transforms, as in torchvision and TorchGeo: `transforms` gets the whole sample as one dict
     ({"image": tensor, **target}; with torchvision installed the tensor is a tv_tensors.Image,
@@ -82,10 +137,13 @@ class TorchView(Dataset):
                  frames: int | None = None, transform: Callable[[Any], Any] | None = None,
                  targets: Sequence[str] = (),
                  transforms: Callable[[dict[str, Any]], dict[str, Any]] | None = None,
-                 target_transform: Callable[[Any], Any] | None = None) -> None:
+                 target_transform: Callable[[Any], Any] | None = None,
+                 dtype: str = "uint8") -> None:
         if modality not in MODALITIES:
             raise VtsError(f"unsupported modality {modality!r}; use one of "
                            f"{', '.join(MODALITIES)}")
+        if dtype not in DTYPES:
+            raise VtsError(f"unsupported dtype {dtype!r}; use {' or '.join(DTYPES)}")
         bad = [t for t in targets if t not in TARGET_ARRAYS]
         if bad:
             raise VtsError(f"unknown target array {bad[0]!r}; use {', '.join(TARGET_ARRAYS)}")
@@ -93,35 +151,89 @@ class TorchView(Dataset):
             raise VtsError("frames apply to slip sequences only")
         self.view, self.modality, self.transform = view, modality, transform
         self.transforms, self.target_transform = transforms, target_transform
-        self.size = _check_size(size)
+        self.size, self.dtype = _check_size(size), dtype
         self.targets = tuple(targets)
         t = view.dataset.info.frames_per_sequence
         self.frames = None if frames is None else frame_numbers(t, int(frames))
-        inputs = {"rgb": ("rgb",), "depth": ("depth",), "rgbd": ("rgb", "depth")}[modality]
+        self.inputs = {"rgb": ("rgb",), "depth": ("depth",), "rgbd": ("rgb", "depth")}[modality]
         from .arrays import check_arrays
 
-        check_arrays(view.dataset.info, inputs, f"modality {modality!r}")
+        check_arrays(view.dataset.info, self.inputs, f"modality {modality!r}")
         for name in self.targets:
             check_arrays(view.dataset.info, (name,), f"target {name!r}")
-        self.arrays = tuple(dict.fromkeys(inputs + self.targets))
+        self.arrays = tuple(dict.fromkeys(self.inputs + self.targets))
 
     def __len__(self) -> int:
         return len(self.view)
 
     def __repr__(self) -> str:
         return (f"TorchView({self.view.kind}, {len(self)} samples, modality={self.modality}, "
-                f"size={self.size}, frames={None if self.frames is None else len(self.frames)})")
+                f"size={self.size}, frames={None if self.frames is None else len(self.frames)}, "
+                f"dtype={self.dtype})")
 
     def __getitem__(self, i: int) -> tuple[Any, dict[str, Any]]:
         return self.__getitems__([i])[0]
 
     def __getitems__(self, items: Sequence[int]) -> list[tuple[Any, dict[str, Any]]]:
-        """Several items read together (DataLoader calls this for a batch)."""
+        """Several items read together (DataLoader calls this for a batch): their rows sorted
+        and read with one store read per contiguous run, resized and converted run by run."""
         items = [int(i) for i in items]
-        arrays = self.view.read(items, self.arrays, frames=self.frames)
         metas = self.view.metas(items)
-        return [self._item({n: a[k] for n, a in arrays.items()}, metas[k])
-                for k in range(len(items))]
+        out: list[tuple[Any, dict[str, Any]] | None] = [None] * len(items)
+        for ks, arrays in self._runs(items):
+            if self.dtype == "float32":
+                for j, k in enumerate(ks):
+                    a = {n: v[j] for n, v in arrays.items()}
+                    out[k] = self._item(self._float_tensor(a),
+                                        self._target(metas[k], self._float_arrays(a)))
+                continue
+            batch = self._uint8_batch(arrays)
+            for j, k in enumerate(ks):
+                x = {n: batch[n][j] for n in self.inputs}
+                x = x.pop(self.modality) if self.modality in x else x
+                spatial = {n: batch[n][j] for n in self.targets}
+                if "depth" in spatial and "depth" in self.inputs:  # not one tensor twice
+                    spatial["depth"] = spatial["depth"].clone()
+                spatial = {n: a[..., 0, :, :] if n == "depth" else a
+                           for n, a in spatial.items()}
+                out[k] = self._item(x, self._target(metas[k], spatial))
+        return out  # type: ignore[return-value]
+
+    def _runs(self, items: list[int]) -> list[tuple[list[int], dict[str, np.ndarray]]]:
+        """The items' arrays, one store read per run of consecutive rows (in row order), as
+        (the items' places in `items`, their arrays) per run.
+
+        One read per run rather than one for the whole batch: the loader would copy the runs
+        into one batch array (and make its depth in mm at batch size, past the allocator's
+        reuse threshold); per run, the arrays are made once. A shuffled batch of 4 slip samples
+        at 480x640 measured 15 against 20 ms of CPU a sample (rgbd, one thread).
+        """
+        if not items:
+            return []
+        rows = self.view.rows[np.asarray(items, np.int64)]
+        order = np.argsort(rows, kind="stable")
+        cuts = np.flatnonzero(np.diff(rows[order]) != 1) + 1
+        runs = []
+        for run in np.split(order, cuts):
+            ks = [int(k) for k in run]
+            runs.append((ks, self.view.read([items[k] for k in ks], self.arrays,
+                                            frames=self.frames)))
+        return runs
+
+    def _uint8_batch(self, arrays: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
+        """A run's tensors: frames resized (OpenCV, while still uint8), rgb as contiguous
+        (B, ..., 3, h, w) uint8, depth (B, ..., 1, h, w) mm, contact (B, ..., h, w) bool."""
+        size = self.size
+        out = {}
+        for name, a in arrays.items():
+            if name == "rgb":
+                a = a if size is None else resize_frames(a, size, channels=True)
+                out[name] = torch.from_numpy(channels_first(a))
+            else:
+                a = a if size is None else resize_frames(a, size)
+                t = torch.from_numpy(np.ascontiguousarray(a))
+                out[name] = t.unsqueeze(-3) if name == "depth" else t
+        return out
 
     @property
     def classes(self) -> list[str]:
@@ -145,7 +257,7 @@ class TorchView(Dataset):
         from .plot import labels_text, plot_arrays
 
         x, target = sample
-        x = torch.as_tensor(x).detach().cpu().float()
+        x = as_float(x if isinstance(x, dict) else torch.as_tensor(x)).detach().cpu()
         seq = x.ndim == 4
         if seq:
             x = x[frame]
@@ -168,10 +280,7 @@ class TorchView(Dataset):
                             target.get("sample_id"))
         return plot_arrays(rgb, depth, pick(target.get("contact")), title)
 
-    def _item(self, arrays: dict[str, np.ndarray], meta: dict[str, Any]
-              ) -> tuple[Any, dict[str, Any]]:
-        x = self._tensor(arrays)
-        target = self._target(arrays, meta)
+    def _item(self, x: Any, target: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
         if self.transforms is not None:
             x, target = _unwrap(self.transforms(_wrap(x, target)))
         if self.transform is not None:
@@ -180,13 +289,11 @@ class TorchView(Dataset):
             target = self.target_transform(target)
         return x, target
 
-    def _tensor(self, arrays: dict[str, np.ndarray]) -> torch.Tensor:
-        """The input tensor, resized, written once into its final buffer.
-
-        Full-size slip tensors are tens of MB and every pass over them is memory-bound: rgb is
-        resized while still uint8 (torch's antialiased uint8 path, about 3x faster than on
-        float; values within one level), then copied into the buffer and scaled to [0, 1].
-        """
+    def _float_tensor(self, arrays: dict[str, np.ndarray]) -> torch.Tensor:
+        """The float32 input tensor (dtype="float32"), resized, written once into its final
+        buffer: rgb resized while still uint8 (torch's antialiased uint8 path, about 3x faster
+        than on float; values within one level), then copied into the buffer and scaled to
+        [0, 1]."""
         size = self.size
         if self.modality == "depth":
             d = torch.from_numpy(np.ascontiguousarray(arrays["depth"])).unsqueeze(-3)
@@ -203,7 +310,19 @@ class TorchView(Dataset):
             out[..., 3, :, :] = d if size is None else resize(d.unsqueeze(-3), size)[..., 0, :, :]
         return out
 
-    def _target(self, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> dict[str, Any]:
+    def _float_arrays(self, arrays: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
+        """The target arrays of dtype="float32": resized with torch (contact nearest)."""
+        out = {}
+        for name in self.targets:
+            a = torch.from_numpy(np.ascontiguousarray(arrays[name]))
+            if self.size is not None:
+                mode = "nearest" if name == "contact" else "bilinear"
+                a = resize(a.unsqueeze(-3).to(torch.float32), self.size, mode).squeeze(-3)
+                a = a > 0.5 if name == "contact" else a
+            out[name] = a
+        return out
+
+    def _target(self, meta: dict[str, Any], spatial: dict[str, torch.Tensor]) -> dict[str, Any]:
         def num(v: float | None) -> float:
             return math.nan if v is None else float(v)
 
@@ -215,12 +334,7 @@ class TorchView(Dataset):
             t["direction"] = -1 if meta["direction"] is None else meta["direction"]
             t["motion_mm"] = torch.tensor(motion, dtype=torch.float32)
         for name in self.targets:
-            a = torch.from_numpy(np.ascontiguousarray(arrays[name]))
-            if self.size is not None:
-                mode = "nearest" if name == "contact" else "bilinear"
-                a = resize(a.unsqueeze(-3).to(torch.float32), self.size, mode).squeeze(-3)
-                a = a > 0.5 if name == "contact" else a
-            t[name] = a
+            t[name] = spatial[name]
         return t
 
 
@@ -232,33 +346,44 @@ def _int(v: Any) -> int | None:
     return None if v < 0 else v
 
 
-def _wrap(x: torch.Tensor, target: dict[str, Any]) -> dict[str, Any]:
+def _wrap(x: Any, target: dict[str, Any]) -> dict[str, Any]:
     """The joint sample: {"image": x, **target}, as torchvision tv_tensors when torchvision is
-    there (Image, or Video for T x C x H x W; depth and contact as Mask)."""
+    there (Image, or Video for T x C x H x W, each tensor of an rgbd dict; depth and contact
+    targets as Mask)."""
     try:
         from torchvision import tv_tensors
     except ImportError:  # plain tensors for a callable that does not need torchvision
         return {"image": x, **target}
+
+    def image(t: torch.Tensor) -> Any:
+        return tv_tensors.Video(t) if t.ndim == 4 else tv_tensors.Image(t)
+
     sample: dict[str, Any] = dict(target)
-    sample["image"] = tv_tensors.Video(x) if x.ndim == 4 else tv_tensors.Image(x)
+    sample["image"] = {k: image(v) for k, v in x.items()} if isinstance(x, dict) else image(x)
     for name in TARGET_ARRAYS:
         if name in sample:
             sample[name] = tv_tensors.Mask(sample[name])
     return sample
 
 
+def _plain(v: Any) -> Any:
+    if isinstance(v, dict):
+        return {k: _plain(a) for k, a in v.items()}
+    return v.as_subclass(torch.Tensor) if isinstance(v, torch.Tensor) else v
+
+
 def _unwrap(sample: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
     """(x, target) of a joint sample, tv_tensors back to plain tensors."""
-    sample = {k: v.as_subclass(torch.Tensor) if isinstance(v, torch.Tensor) else v
-              for k, v in sample.items()}
+    sample = {k: _plain(v) for k, v in sample.items()}
     x = sample.pop("image")
     return x, sample
 
 
 class HorizontalFlip:
-    """A joint transform that mirrors a sample left-right with its labels: the image, depth and
-    contact, the slip direction (vtsbench.labels.MIRROR_X: right <-> left, up stays up) and the
-    motion's x. A flip of the pixels alone would leave a slip sample's direction wrong.
+    """A joint transform that mirrors a sample left-right with its labels: the image (each
+    tensor of an rgbd dict), depth and contact, the slip direction (vtsbench.labels.MIRROR_X:
+    right <-> left, up stays up) and the motion's x. A flip of the pixels alone would leave a
+    slip sample's direction wrong.
 
     p: the probability of flipping; generator: a torch.Generator for reproducible draws.
     """
@@ -276,8 +401,11 @@ class HorizontalFlip:
             return sample
         out = dict(sample)
         for name in ("image", *TARGET_ARRAYS):
-            if name in out:
-                out[name] = out[name].flip(-1)
+            v = out.get(name)
+            if isinstance(v, dict):
+                out[name] = {k: a.flip(-1) for k, a in v.items()}
+            elif v is not None:
+                out[name] = v.flip(-1)
         d = out.get("direction")
         if d is not None and int(d) >= 0:
             out["direction"] = MIRROR_X[int(d)]

@@ -188,10 +188,12 @@ class View:
     def to_torch(self, modality: str = "rgb", size: tuple[int, int] | None = None,
                  frames: int | None = None, transform: Any = None,
                  targets: Sequence[str] = (), *, transforms: Any = None,
-                 target_transform: Any = None) -> torch.utils.data.Dataset:
-        """A torch Dataset of (tensor, target dict); `transforms` sees the whole sample as one
-        dict, `transform` the tensor, `target_transform` the target; see
-        vtsbench.dataset.read.torch_dataset."""
+                 target_transform: Any = None, dtype: str = "uint8"
+                 ) -> torch.utils.data.Dataset:
+        """A torch Dataset of (tensor, target dict): uint8 frames resized in the worker
+        (OpenCV INTER_AREA), or dtype="float32" for float tensors in [0, 1]; `transforms` sees
+        the whole sample as one dict, `transform` the tensor, `target_transform` the target;
+        see vtsbench.dataset.read.torch_dataset."""
         try:
             from .torch_dataset import TorchView
         except ModuleNotFoundError as e:
@@ -199,7 +201,7 @@ class View:
 
         return TorchView(self, modality=modality, size=size, frames=frames, transform=transform,
                          targets=targets, transforms=transforms,
-                         target_transform=target_transform)
+                         target_transform=target_transform, dtype=dtype)
 
     def to_hf(self, arrays: Sequence[str] | None = None, *, copy: bool = False,
               writer_batch_size: int = 8, cache_dir: str | os.PathLike | None = None

@@ -7,11 +7,13 @@ every split of every scheme is a list of whole files: the card's YAML `configs` 
 `slip_<scheme>` and `static_<scheme>` configs whose splits point at those files, and no sample is
 stored twice however many schemes hold it.
 
-Columns: the index's labels (object, state and direction as ClassLabel ids), `rgb` as PNG images
-(a list of T for a slip sample; lossless uint8), `depth` as float32 mm (exactly the loader's
-values: the stored int16 counts x 0.001), `contact` as 1-bit PNG images (decoding to bool),
-and `depth_preview`, a colour-mapped PNG of the depth for the Hub viewer. The arrow schema
-carries the `huggingface` features metadata.
+Columns (layout version `hub_rows.HUB_VERSION`): the index's labels (object, state and direction
+as ClassLabel ids), then images that `datasets` decodes on access, so its Arrow cache is no larger
+than the parquet: `rgb` as lossless TIFFs (a list of T for a slip sample; uint8), `depth` as 16-bit
+TIFFs of the stored int16 counts (x the depth scale = the loader's mm, bit for bit), `contact` as
+1-bit PNGs (decoding to bool), and `depth_preview`, a colour-mapped PNG of the depth for the Hub
+viewer (not decoded by `datasets`). The arrow schema carries the `huggingface` features metadata
+and the layout version.
 """
 
 from __future__ import annotations
@@ -135,11 +137,13 @@ def export_hf(dataset: str | Path, *, workers: int = 1, license: str = "unknown"
     from ..build.staging import commit, locked_stage, recover
     from ..read.loader import load
     from .hub_layout import write_hub_card
+    from .hub_rows import check_codecs
 
     t0 = time.perf_counter()
     if not re.fullmatch(r"[a-z0-9][a-z0-9.+-]{0,63}", license):
         raise VtsError(f"license must be a Hub license id (lower case, e.g. cc-by-4.0, mit, "
                        f"other), got {license!r}")
+    check_codecs()
     given = Path(dataset)
     root = given.resolve()
     recover(root, export_stage(root), EXPORT_WORK)  # a killed export or build: put right

@@ -12,6 +12,7 @@ from ...atomic import write_bytes_atomic
 from ..build.card import HubCard, card_text, plan_of
 from ..format.info import DatasetInfo
 from ..format.layout import CARD_PATH, HUB_DIR, KINDS
+from .hub_rows import HUB_VERSION
 
 #: Parts of a split scheme -> split names of `datasets` (train, validation, test; folds as is).
 SPLIT_NAMES = {"val": "validation"}
@@ -80,30 +81,39 @@ def hub_section(info: DatasetInfo, hub: HubLayout) -> str:
     first = default_config(hub) or ""
     first_split = next(iter(hub.configs.get(first, {"train": []})), "train")
     depth = f"""\
-`depth` is float32 **millimetres** of indentation into the gel (positive into the gel): the
-stored int16 counts x {info.depth_scale_mm}, exactly what `vtsbench.load` returns; `contact`
-is the contact mask as 1-bit PNG images (bool in numpy); `depth_preview` is the depth
-colour-mapped for viewing
-(viridis, from 0 to the sample's maximum or 0.05 mm, whichever is larger).""" if (
+`depth` holds 16-bit TIFFs of the stored int16 depth counts (their bits as uint16): view them as
+int16 and multiply by {info.depth_scale_mm} (in float32) for **millimetres** of indentation into
+the gel (positive into the gel), exactly what `vtsbench.load` returns; `contact` is the contact
+mask as 1-bit PNG images (bool in numpy); `depth_preview` is the depth colour-mapped for viewing
+(viridis, from 0 to the sample's maximum or 0.05 mm, whichever is larger), left encoded by
+`datasets` (`Image(decode=False)`: cast it to `Image()` to decode it).""" if (
         info.has_depth) else "This dataset has no depth: `rgb` and the labels only."
+    scale = info.depth_scale_mm
+    convert = ("\ndepth_mm = row[\"depth\"].view(np.int16).astype(np.float32) * "
+               f"np.float32({scale})  # mm") if info.has_depth else ""
     return f"""## Hugging Face datasets
 
 Every sample is in `{HUB_DIR}/` as parquet, once: a file holds the samples that share their part
-in every split scheme, so each config below is a list of whole files per split. `rgb` holds the
-frames as lossless PNG images (a list of {info.frames_per_sequence} for a slip sample) that decode
-to exactly the stored uint8 pixels; `object`, `state` and `direction` are `ClassLabel`s with the
-project's names. {depth}
+in every split scheme, so each config below is a list of whole files per split. Layout version
+{HUB_VERSION}: every frame is an `Image` that `datasets` decodes when a row is read, so the Arrow
+cache `load_dataset` builds holds the encoded bytes and is no larger than the parquet. `rgb` holds
+the frames as lossless TIFFs (zstd; a list of {info.frames_per_sequence} for a slip sample) that
+decode to exactly the stored uint8 pixels; `object`, `state` and `direction` are `ClassLabel`s
+with the project's names. {depth}
 
 | config | kind | samples per split |
 |---|---|---|
 {rows}
 
+Read rows with `.with_format("numpy")`: arrays, not PIL images (a slip sample's frames stacked).
+
 ```python
 import datasets
+import numpy as np
 train = datasets.load_dataset("path/to/this/folder", "{first}", split="{first_split}")
+row = train.with_format("numpy")[0]  # rgb uint8 (T, H, W, 3), contact bool{convert}
 stream = datasets.load_dataset("path/to/this/folder", "{first}", split="{first_split}",
-                               streaming=True)
-row = next(iter(stream.with_format("numpy")))  # rgb uint8, depth float32 mm, contact bool
+                               streaming=True).with_format("numpy")
 names = train.features["object"].names
 ```
 

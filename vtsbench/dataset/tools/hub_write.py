@@ -17,7 +17,7 @@ import numpy as np
 from ...errors import VtsError
 from ..format.layout import ARRAYS, HUB_DIR
 from .hub_layout import HubFile
-from .hub_rows import arrow_schema, extra_columns, rows_table
+from .hub_rows import IMAGE_COLUMNS, arrow_schema, extra_columns, rows_table
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -66,14 +66,14 @@ def _rows_per(view: View, target: int, encoded_ratio: float = 1.0) -> int:
 
 
 def _parquet_options(schema: pa.Schema) -> dict[str, Any]:
-    """zstd pages; dictionaries and statistics for the label columns only.
-
-    The depth (float32 mm, 480x640 frames, one core): dictionary encoding 33 ms and 42 kB a
-    frame, plain 6.3 ms and 61 kB, byte-stream-split 13 ms and 115 kB (the counts x 0.001 have
-    noisy low mantissa bytes): plain, at a fifth of the time for 45 % more bytes of depth.
-    """
-    labels = [f.name for f in schema if f.name not in (*ARRAYS, "depth_preview")]
-    return {"compression": "zstd", "compression_level": 3, "use_dictionary": labels,
+    """zstd pages for the labels, with dictionaries and statistics; the image columns stored
+    as they are: their TIFFs and PNGs are compressed already, so zstd would gain little and
+    leave the parquet smaller than the Arrow cache `load_dataset` makes of it (which holds
+    the images' bytes uncompressed)."""
+    labels = [f.name for f in schema if f.name not in (*ARRAYS, *IMAGE_COLUMNS)]
+    packed = [f.name for f in schema if f.name not in IMAGE_COLUMNS]
+    return {"compression": {n: "zstd" if n in packed else "none" for n in schema.names},
+            "compression_level": dict.fromkeys(packed, 3), "use_dictionary": labels,
             "write_statistics": labels}
 
 

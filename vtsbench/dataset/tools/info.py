@@ -16,7 +16,7 @@ from typing import Any
 from ...labels import DIRECTION_NAMES, STATES
 from ..format.index import read_index
 from ..format.info import DatasetInfo, load_info
-from ..format.layout import DATA_DIR, KINDS, index_path
+from ..format.layout import DATA_DIR, EPISODES, EPISODES_INDEX, KINDS, index_path
 
 
 @dataclass
@@ -48,6 +48,8 @@ def _summarise(root: Path) -> Summary:
         path = root / index_path(kind)
         if path.is_file():
             tables[kind] = read_index(path, kind, columns=_columns(kind))
+    if info.episodes is not None:
+        tables[EPISODES] = read_index(root / EPISODES_INDEX, EPISODES, columns=["object"])
     sizes: dict[str, int] = {}
     for p in root.rglob("*"):
         if p.is_file():
@@ -64,6 +66,9 @@ def _summarise_remote(url: str) -> Summary:
     info = remote_info(loc)
     tables = {kind: loc.checked(index_path(kind), functools.partial(
         read_index, kind=kind, columns=_columns(kind))) for kind in KINDS}
+    if info.episodes is not None:
+        tables[EPISODES] = loc.checked(EPISODES_INDEX, functools.partial(
+            read_index, kind=EPISODES, columns=["object"]))
     sizes: dict[str, int] = {}
     for rel, size in remote_sizes(loc, info).items():
         _add_size(sizes, tuple(rel.split("/")), size)
@@ -86,7 +91,8 @@ def _summary(info: DatasetInfo, tables: dict[str, Any], sizes: dict[str, int]) -
     for kind, t in tables.items():
         d = t.to_pydict()
         for i, obj in enumerate(d["object"]):
-            key = "static" if kind == "static" else f"slip:{d['state'][i] or 'unknown'}"
+            key = (kind if kind in ("static", EPISODES)
+                   else f"slip:{d['state'][i] or 'unknown'}")
             row = by_object.setdefault(obj, {})
             row[key] = row.get(key, 0) + 1
     raw = 0
@@ -121,16 +127,25 @@ def render(s: Summary, console: Any) -> None:
     depth = (f"calibration {cal.sensor + ' / ' + cal.method if cal else 'none'}, solver "
              f"{info.build.get('solver', '?')}" if info.has_depth
              else "rgb only: no depth or contact (built with --no-depth)")
+    if info.episodes is not None and info.created_by == "vtsbench.create":  # no build of it
+        depth = "rgb, depth and contact" if info.has_depth else "rgb only: no depth or contact"
     console.print(f"[bold]{escape(info.name)}[/] " + escape(
                   f"{info.dataset_version} (format {info.format_version}, "
                   f"vtsbench {info.vtsbench_version}); {info.resolution[0]}x"
                   f"{info.resolution[1]} frames, T = {info.frames_per_sequence}; {depth}"),
                   highlight=False)
     console.print(f"dataset_sha256 {info.dataset_sha256}", highlight=False)
+    ep = info.episodes
+    if ep is not None:
+        console.print(f"episodes {ep.episodes}, {ep.frames} frames ({ep.dropped_frames} dropped"
+                      f"); frames per state: " + ", ".join(f"{k} {v}" for k, v in
+                                                           ep.states.items()), highlight=False)
     t = Table(title="samples per object", title_justify="left")
     cols = ["static", *(f"slip:{x}" for x in STATES)]
     if any("slip:unknown" in row for row in s.by_object.values()):
         cols.append("slip:unknown")
+    if info.episodes is not None:
+        cols.append(EPISODES)
     longest = max((len(o) for o in s.by_object), default=6)
     t.add_column("object", min_width=min(longest, 40), overflow="fold")  # names never cut
     for c in ("class", *cols):  # "slip:press" headed "slip" over "press": fits 80 columns

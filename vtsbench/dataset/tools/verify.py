@@ -20,7 +20,16 @@ import numpy as np
 from ...errors import VtsError
 from ..format.arrays import MISSING, Layout
 from ..format.info import DatasetInfo, dataset_checksum, load_info
-from ..format.layout import INFO_PATH, KINDS, SPLITS_DIR, group_path, index_path, split_path
+from ..format.layout import (
+    EPISODES,
+    EPISODES_INDEX,
+    INFO_PATH,
+    KINDS,
+    SPLITS_DIR,
+    group_path,
+    index_path,
+    split_path,
+)
 from ..format.problems import SHOWN
 from ..format.records import SPLIT_NAME
 
@@ -139,6 +148,19 @@ def check_index(root: Path, info: DatasetInfo, report: VerifyReport) -> dict[str
     report.problems += [f"index: {b}" for b in ids_problems(out)]
     report.problems += [f"{INFO_PATH}: {b}" for b in counts_problems(info, out)]
     report.samples = sum(len(t) for t in out.values())
+    if info.episodes is not None:  # format 1.2: the episode and frame indexes
+        from ..format.episodes import episodes_problems, read_table
+        from ..read.episodes import store_table
+
+        try:
+            tables = [read_table(root, which) for which in ("episodes", "frames")]
+        except VtsError as e:
+            report.problems.append(str(e).replace(f"{root}/", "", 1))
+            return out
+        bad = episodes_problems(*tables, info)
+        report.problems += [f"{EPISODES_INDEX}: {b}" for b in bad]
+        if not bad:
+            out[EPISODES] = store_table(*tables)  # ids of the frames: `<episode id>/<frame>`
     return out
 
 
@@ -197,12 +219,13 @@ def check_arrays(root: Path, info: DatasetInfo, index: dict[str, Any],
     the format that wrote them); then decode every chunk."""
     from ...jsonio import read_json
     from ..format.arrays import zarr_problems
+    from ..read.episodes import open_frames_group
     from ..read.store import open_group
 
-    for kind in KINDS:
+    for kind in (k for k in (*KINDS, EPISODES) if k in info.shapes):
         where = group_path(kind)
         try:
-            group = open_group(root, kind)
+            group = open_group(root, kind) if kind in KINDS else open_frames_group(root)
             group_doc = read_json(root / where / "zarr.json", "Zarr metadata")
         except VtsError as e:
             report.problems.append(f"{where}: {_strip(e, root / where)}")

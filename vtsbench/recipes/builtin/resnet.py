@@ -132,7 +132,7 @@ class ResnetRecipe(Recipe):
         size = int(config["image_size"])
         if config.get("crop_px"):  # cut around each frame's contact, kept once cut
             return StaticCrops(view, int(config["crop_px"]), size, config["modality"])
-        return view.to_torch(config["modality"], size=(size, size))
+        return view.to_torch(config["modality"], size=(size, size), dtype="float32")
 
     def train(self, dataset_path: str | Path, split: str, out_dir: str | Path,
               config: dict[str, Any], *, seed: int = 0, device: str = "auto",

@@ -200,7 +200,8 @@ class TimesformerRecipe(Recipe):
                                  flow=flow_kind(config),
                                  soft_px=float(config.get("flow_soft_px") or FLOW_SOFT_PX),
                                  flow_mask=config.get("flow_mask") == "contact")
-        return view.to_torch(config["modality"], size=(size, size), frames=frames)
+        return view.to_torch(config["modality"], size=(size, size), frames=frames,
+                             dtype="float32")
 
     @staticmethod
     def _input_scale(view: Any, data: Any, size: int) -> tuple[float, float]:

@@ -1,0 +1,201 @@
+"""Finishing a dataset of episodes: the frames store's last shard and metadata, the episode and
+frame indexes, the static and slip kinds (empty: their index and Zarr group hold no sample, so
+every reader of a dataset reads this one), info.json (format 1.2, with the episode counts), the
+card, every file's sha256, and the rename of the partial folder to OUT (build/staging.py's
+commit, as a build finishes)."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ...atomic import write_bytes_atomic
+from ...errors import VtsError
+from ..format.arrays import Layout
+from ..format.episodes import (
+    EpisodeRecord,
+    episode_counts,
+    episodes_problems,
+    episodes_table,
+    frames_arrow_schema,
+    table_bytes,
+)
+from ..format.index import index_bytes
+from ..format.info import (
+    EPISODES_FORMAT_VERSION,
+    Counts,
+    DatasetInfo,
+    ZarrSettings,
+    consistency_problems,
+    dataset_checksum,
+    info_schema_errors,
+)
+from ..format.layout import (
+    CARD_PATH,
+    CHECKSUMMED,
+    EPISODES,
+    EPISODES_GROUP,
+    EPISODES_INDEX,
+    FRAMES_INDEX,
+    INFO_PATH,
+    KINDS,
+    group_path,
+    index_path,
+)
+from ..format.provenance import package_version, versions
+from .card import size_category
+from .finish import hash_files
+from .staging import commit
+from .store import samples_per_shard, write_metadata
+
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+    from .episode_stage import FrameShards
+
+
+def merged_kinds(records: Sequence[dict[str, Any]]) -> dict[str, str]:
+    """The kind of every per-frame extra column over all episodes (int and float: float)."""
+    out: dict[str, str] = {}
+    for r in records:
+        for name, kind in r["extra_kinds"].items():
+            have = out.get(name)
+            out[name] = "float" if "float" in (kind, have) and have is not None else kind
+    return out
+
+
+def frames_table(records: Sequence[dict[str, Any]]) -> pa.Table:
+    """index/frames.parquet's rows: every frame of every episode, in store order."""
+    import numpy as np
+    import pyarrow as pa
+
+    kinds = merged_kinds(records)
+    lengths = [int(r["record"]["length"]) for r in records]
+    cols: dict[str, Any] = {
+        "episode_index": np.repeat(np.arange(len(records), dtype=np.int64), lengths),
+        "frame_index": np.concatenate([np.arange(n, dtype=np.int64) for n in lengths]),
+        "timestamp": np.concatenate([np.asarray(r["timestamps"], np.float64) for r in records]),
+        "state": [s for r in records for s in r["state"]],
+        "direction": [d for r in records for d in r["direction"]],
+    }
+    for name in sorted(kinds):
+        cols[name] = [v for r, n in zip(records, lengths, strict=True)
+                      for v in r["extra"].get(name, [None] * n)]
+        if kinds[name] == "float":
+            cols[name] = [None if v is None else float(v) for v in cols[name]]
+    return pa.Table.from_pydict(cols, schema=frames_arrow_schema(kinds))
+
+
+def finish_episodes(stage: Path, out: Path, shards: FrameShards,
+                    records: Sequence[dict[str, Any]], *, name: str, dataset_version: str,
+                    shard_mb: float) -> DatasetInfo:
+    """Write everything but the frames' shards, checksum it and rename the stage to OUT."""
+    shards.finalize()
+    lay = shards.layout
+    assert lay is not None
+    size = lay.frame
+    episodes = episodes_table([EpisodeRecord.from_dict(r["record"]) for r in records])
+    frames = frames_table(records)
+    for rel, table in ((EPISODES_INDEX, episodes), (FRAMES_INDEX, frames)):
+        (stage / rel).parent.mkdir(parents=True, exist_ok=True)
+        write_bytes_atomic(stage / rel, table_bytes(table))
+    layouts = {}
+    for kind in KINDS:  # no samples: an empty index and group
+        t = 1 if kind == "slip" else None
+        layouts[kind] = Layout(kind, 0, size, t, samples_per_shard(
+            size, t, int(shard_mb * 2**20)), lay.level, lay.arrays)
+        write_metadata(stage / group_path(kind), layouts[kind])
+        write_bytes_atomic(stage / index_path(kind), index_bytes(kind, []))
+    layouts[EPISODES] = replace(lay, n=shards.committed)
+    info = DatasetInfo(
+        name=name, vtsbench_version=package_version(), frames_per_sequence=1,
+        resolution=size, objects=sorted(set(episodes.column("object").to_pylist())),
+        counts=Counts(), shapes={k: {n: v.shape(n) for n in v.arrays}
+                                 for k, v in layouts.items()},
+        zarr=ZarrSettings({k: v.samples_per_shard for k, v in layouts.items()},
+                          "zstd" if lay.level else "none", lay.level),
+        dataset_version=dataset_version, created_by="vtsbench.create",
+        build={"writer": "vtsbench.create", "arrays": list(lay.arrays),
+               "compression_level": lay.level, "shard_mb": shard_mb, "versions": versions()},
+        format_version=EPISODES_FORMAT_VERSION, episodes=episode_counts(episodes, frames))
+    _refuse(consistency_problems(info) + episodes_problems(episodes, frames, info), stage)
+    content = hash_files(stage, lambda rel: rel.startswith(CHECKSUMMED))
+    info.dataset_sha256 = dataset_checksum(content)
+    write_bytes_atomic(stage / CARD_PATH, card_text(info).encode("utf-8"))
+    info.files = {**content, **hash_files(
+        stage, lambda rel: not rel.startswith(CHECKSUMMED) and rel != INFO_PATH)}
+    _refuse(info_schema_errors(info.to_dict()), stage)
+    (stage / INFO_PATH).parent.mkdir(exist_ok=True)
+    write_bytes_atomic(stage / INFO_PATH, info.to_json().encode())
+    commit(stage, out)
+    return info
+
+
+def _refuse(bad: list[str], stage: Path) -> None:
+    """What the writer would put in info.json contradicts the format: a one-line error (the
+    partial folder stays, so nothing saved is lost)."""
+    if bad:
+        raise VtsError(f"{bad[0]}{f' (and {len(bad) - 1} more)' if len(bad) > 1 else ''}",
+                       stage / INFO_PATH)
+
+
+def card_text(info: DatasetInfo) -> str:
+    """README.md of a dataset of episodes: YAML header (its configs read the two episode
+    indexes) and what it holds."""
+    ep = info.episodes
+    assert ep is not None
+    h, w = info.resolution
+    depth = info.has_depth
+    head = "\n".join([
+        "---", f"pretty_name: {json.dumps(info.name)}", "license: unknown",
+        "task_categories:", "- video-classification", "size_categories:",
+        f"- {size_category(ep.episodes)}", "tags:", "- tactile", "- visuo-tactile",
+        "- rgb-d" if depth else "- rgb", "- vtsbench", "- episodes", "configs:",
+        "- config_name: episodes", "  data_files:", "  - split: index",
+        f"    path: {EPISODES_INDEX}", "  default: true", "- config_name: frames",
+        "  data_files:", "  - split: index", f"    path: {FRAMES_INDEX}", "---", ""])
+    arrays = ("`rgb` (uint8, RGB), `depth` (int16; value x "
+              f"{info.depth_scale_mm} = mm) and `contact` (bool)" if depth
+              else "`rgb` (uint8, RGB) only: no depth or contact")
+    comp = f"zstd level {info.zarr.level}" if info.zarr.level else "none"
+    return head + f"""
+# {info.name}
+
+Visuo-tactile episodes written by `vtsbench.create` (dataset version {info.dataset_version},
+format {info.format_version}): {ep.episodes} continuous takes, {ep.frames} frames of {h}x{w},
+each frame stored once; windows of any length, stride or time offsets are chosen when reading.
+
+| episodes | frames | objects | sessions | dropped frames |
+|---:|---:|---:|---:|---:|
+| {ep.episodes} | {ep.frames} | {len(ep.objects)} | {len(ep.sessions)} | {ep.dropped_frames} |
+
+Objects: {", ".join(info.objects)}.
+
+## Loading
+
+```python
+import vtsbench
+ds = vtsbench.load("path/to/this/folder")
+print(ds.episodes.index)                      # one row per episode
+clips = ds.episodes.windows(length=8, stride=8)
+clip = clips[0]                               # rgb (8, H, W, 3), timestamps, labels
+```
+
+## Arrays
+
+`{EPISODES_GROUP}` is a Zarr v3 group with {arrays}: every frame of every episode in episode
+order, one frame per chunk, shards of {info.zarr.samples_per_shard[EPISODES]} frames, {comp}
+with a crc32c per chunk. Row r is row r of `{FRAMES_INDEX}` (timestamp in seconds from the
+episode start, state, direction); `{EPISODES_INDEX}` gives each episode's first row
+(`frame_start`) and `length`.
+
+## Provenance
+
+- vtsbench {info.vtsbench_version}; per-file sha256 and the content checksum in `{INFO_PATH}`
+- dataset_sha256: `{info.dataset_sha256}`
+
+Check a copy with `vtsbench verify <folder>`; summarise it with `vtsbench info <folder>`.
+"""
