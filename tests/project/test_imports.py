@@ -7,59 +7,12 @@ imports under `if TYPE_CHECKING:`, which exist for annotations only and never ru
 
 from __future__ import annotations
 
-import ast
 from pathlib import Path
 
 import vtsbench
+from tests.fixtures.import_graph import import_graph
 
 ROOT = Path(vtsbench.__file__).parent
-
-
-def module_name(path: Path, root: Path) -> str:
-    """The dotted name of a source file under the package root."""
-    parts = list(path.relative_to(root.parent).with_suffix("").parts)
-    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
-
-
-def _is_type_checking(test: ast.expr) -> bool:
-    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
-        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
-
-
-def imported_names(tree: ast.Module, module: str, is_package: bool) -> set[str]:
-    """Every dotted name an `import` in the tree may load (outside TYPE_CHECKING blocks):
-    for `from a import b`, both `a` and `a.b` (b may be a module or a name in a)."""
-    package = module if is_package else module.rpartition(".")[0]
-    out: set[str] = set()
-    todo: list[ast.AST] = [tree]
-    while todo:
-        node = todo.pop()
-        if isinstance(node, ast.If) and _is_type_checking(node.test):
-            todo.extend(node.orelse)
-            continue
-        if isinstance(node, ast.Import):
-            out.update(a.name for a in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")[: len(package.split(".")) - node.level + 1]
-                src = ".".join(base + ([node.module] if node.module else []))
-            else:
-                src = node.module or ""
-            out.add(src)
-            out.update(f"{src}.{a.name}" for a in node.names)
-        todo.extend(ast.iter_child_nodes(node))
-    return out
-
-
-def import_graph(root: Path) -> dict[str, set[str]]:
-    """Module -> the package's modules it imports."""
-    files = {module_name(p, root): p for p in sorted(root.rglob("*.py"))}
-    graph = {}
-    for name, path in files.items():
-        tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
-        names = imported_names(tree, name, path.name == "__init__.py")
-        graph[name] = {n for n in names if n in files and n != name}
-    return graph
 
 
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:

@@ -7,12 +7,12 @@ annotation that needs a later stage's type says the type lives in the wrong modu
 
 from __future__ import annotations
 
-import ast
 from pathlib import Path
 
 import pytest
 
 import vtsbench
+from tests.fixtures.import_graph import import_graph, module_name
 
 ROOT = Path(vtsbench.__file__).parent
 
@@ -20,39 +20,9 @@ ROOT = Path(vtsbench.__file__).parent
 DATASET_STAGES = ("format", "splits", "read", "build", "tools")
 
 
-def module_name(path: Path, root: Path) -> str:
-    """The dotted name of a source file under the package root."""
-    parts = list(path.relative_to(root.parent).with_suffix("").parts)
-    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
-
-
-def all_imports(tree: ast.Module, module: str, is_package: bool) -> set[str]:
-    """Every dotted name any `import` in the tree may load, TYPE_CHECKING blocks included."""
-    package = module if is_package else module.rpartition(".")[0]
-    out: set[str] = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            out.update(a.name for a in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")[: len(package.split(".")) - node.level + 1]
-                src = ".".join(base + ([node.module] if node.module else []))
-            else:
-                src = node.module or ""
-            out.add(src)
-            out.update(f"{src}.{a.name}" for a in node.names)
-    return out
-
-
 def graph(root: Path) -> dict[str, set[str]]:
     """Module -> the package's modules it imports (any import, any place)."""
-    files = {module_name(p, root): p for p in sorted(root.rglob("*.py"))}
-    out = {}
-    for name, path in files.items():
-        tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
-        names = all_imports(tree, name, path.name == "__init__.py")
-        out[name] = {n for n in names if n in files and n != name}
-    return out
+    return import_graph(root, type_checking=True)
 
 
 def stage_of(module: str, top: str) -> int | None:

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator, Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -47,31 +46,11 @@ MAX_WINDOW = 100_000
 
 def open_frames_group(root: str | os.PathLike, storage_options: dict[str, Any] | None = None
                       ) -> Any:
-    """data/episodes.zarr of a dataset, read-only, from a path or an fsspec URL (as
-    read/store.py opens the static and slip groups)."""
-    import zarr
-    from zarr.storage import LocalStore
+    """data/episodes.zarr of a dataset, read-only, from a path or an fsspec URL (opened as the
+    static and slip groups are)."""
+    from .store import open_group_at
 
-    from ...jsonio import loads, read_json
-
-    loc = f"{str(root).rstrip('/')}/{EPISODES_GROUP}"
-    if "://" in loc:
-        from .location import read_remote, remote_store
-
-        meta = f"{loc}/zarr.json"
-        loads(read_remote(meta, storage_options, missing="no such Zarr group"), meta,
-              "Zarr metadata")
-        store = remote_store(loc, storage_options)
-    else:
-        if not Path(loc).is_dir():
-            raise VtsError("no such Zarr group", loc)
-        store = LocalStore(loc, read_only=True)
-        read_json(Path(loc) / "zarr.json", "Zarr metadata")
-    try:
-        return zarr.open_group(store, mode="r", use_consolidated=True)
-    except Exception as e:  # a changed zarr.json
-        raise VtsError(f"cannot open the Zarr group ({type(e).__name__}; its zarr.json was "
-                       "changed?)", loc) from None
+    return open_group_at(f"{str(root).rstrip('/')}/{EPISODES_GROUP}", storage_options)
 
 
 def read_tables(loc: Location, info: DatasetInfo) -> tuple[pa.Table, pa.Table]:

@@ -56,14 +56,19 @@ def open_group(root: str | os.PathLike, kind: str,
                storage_options: dict[str, Any] | None = None) -> Any:
     """Open a dataset's `static` or `slip` group read-only, from a path or an fsspec URL (read
     through read/location.py: timeouts, size limits, servers without byte ranges)."""
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+    return open_group_at(group_location(root, kind), storage_options)
+
+
+def open_group_at(loc: str, storage_options: dict[str, Any] | None = None) -> Any:
+    """Open the Zarr group at a path or URL read-only, its zarr.json checked first (any
+    group of a dataset: a kind's, or the episodes' frames)."""
     import zarr
     from zarr.storage import LocalStore
 
     from ...jsonio import loads, read_json
 
-    if kind not in KINDS:
-        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
-    loc = group_location(root, kind)
     if _is_url(loc):
         from .location import read_remote, remote_store
 
