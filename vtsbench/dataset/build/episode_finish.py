@@ -1,8 +1,8 @@
 """Finishing a dataset of episodes: the frames store's last shard and metadata, the episode and
 frame indexes, the static and slip kinds (empty: their index and Zarr group hold no sample, so
 every reader of a dataset reads this one), info.json (format 1.2, with the episode counts), the
-card, every file's sha256, and the rename of the partial folder to OUT (build/staging.py's
-commit, as a build finishes)."""
+split files over the episodes (splits/episodes.py), card, every file's sha256, and the
+rename of the partial folder to OUT (build/staging.py's commit, as a build finishes)."""
 
 from __future__ import annotations
 
@@ -42,10 +42,13 @@ from ..format.layout import (
     FRAMES_INDEX,
     INFO_PATH,
     KINDS,
+    SPLITS_DIR,
     group_path,
     index_path,
 )
 from ..format.provenance import package_version, versions
+from ..splits.episodes import make_episode_splits, split_sizes
+from ..splits.files import write_splits
 from .card import size_category
 from .finish import hash_files
 from .staging import commit
@@ -91,8 +94,9 @@ def frames_table(records: Sequence[dict[str, Any]]) -> pa.Table:
 
 def finish_episodes(stage: Path, out: Path, shards: FrameShards,
                     records: Sequence[dict[str, Any]], *, name: str, dataset_version: str,
-                    shard_mb: float) -> DatasetInfo:
-    """Write everything but the frames' shards, checksum it and rename the stage to OUT."""
+                    shard_mb: float, seed: int = 0) -> DatasetInfo:
+    """Write everything but the frames' shards, checksum it and rename the stage to OUT;
+    seed: the split schemes' (the same episodes and seed give the same split files)."""
     shards.finalize()
     lay = shards.layout
     assert lay is not None
@@ -110,16 +114,23 @@ def finish_episodes(stage: Path, out: Path, shards: FrameShards,
         write_metadata(stage / group_path(kind), layouts[kind])
         write_bytes_atomic(stage / index_path(kind), index_bytes(kind, []))
     layouts[EPISODES] = replace(lay, n=shards.committed)
+    splits = make_episode_splits(episodes, seed=seed)
+    split_dir = stage / SPLITS_DIR
+    if split_dir.is_dir():  # a finish that failed before: its files go, the new ones come
+        for p in split_dir.glob("*.json"):
+            p.unlink()
+    split_sha = write_splits(split_dir, splits.splits) if splits.splits else {}
     info = DatasetInfo(
         name=name, vtsbench_version=package_version(), frames_per_sequence=1,
         resolution=size, objects=sorted(set(episodes.column("object").to_pylist())),
-        counts=Counts(), shapes={k: {n: v.shape(n) for n in v.arrays}
-                                 for k, v in layouts.items()},
+        counts=Counts(splits=dict(split_sizes(splits.splits))), splits=split_sha,
+        shapes={k: {n: v.shape(n) for n in v.arrays} for k, v in layouts.items()},
         zarr=ZarrSettings({k: v.samples_per_shard for k, v in layouts.items()},
                           "zstd" if lay.level else "none", lay.level),
         dataset_version=dataset_version, created_by="vtsbench.create",
         build={"writer": "vtsbench.create", "arrays": list(lay.arrays),
-               "compression_level": lay.level, "shard_mb": shard_mb, "versions": versions()},
+               "compression_level": lay.level, "shard_mb": shard_mb, "split_seed": seed,
+               "splits_skipped": dict(sorted(splits.skipped.items())), "versions": versions()},
         format_version=EPISODES_FORMAT_VERSION, episodes=episode_counts(episodes, frames))
     _refuse(consistency_problems(info) + episodes_problems(episodes, frames, info), stage)
     content = hash_files(stage, lambda rel: rel.startswith(CHECKSUMMED))

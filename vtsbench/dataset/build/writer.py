@@ -68,17 +68,18 @@ def create(path: str | Path, *, fps: float = 25.0, arrays: Sequence[str] = ("rgb
            sensor: str = "unknown", name: str | None = None,
            calibration_sha256: str | None = None, resume: bool = False,
            overwrite: bool = False, dataset_version: str = "1.0.0",
-           compression_level: int = 3, shard_mb: float = 32.0) -> EpisodeWriter:
+           compression_level: int = 3, shard_mb: float = 32.0, seed: int = 0) -> EpisodeWriter:
     """A writer of episodes into a new dataset at `path` (see EpisodeWriter).
 
     fps, sensor and calibration_sha256 are each episode's defaults (save_episode may give its
     own); arrays: ("rgb",) or ("rgb", "depth", "contact"); resume=True continues the partial
     dataset a killed writer left (every saved episode kept); overwrite=True replaces an
-    existing dataset at `path` when finished."""
+    existing dataset at `path` when finished; seed: the split schemes' at finish()
+    (unseen_objects, unseen_sessions over the episodes)."""
     return EpisodeWriter(path, fps=fps, arrays=arrays, sensor=sensor, name=name,
                          calibration_sha256=calibration_sha256, resume=resume,
                          overwrite=overwrite, dataset_version=dataset_version,
-                         compression_level=compression_level, shard_mb=shard_mb)
+                         compression_level=compression_level, shard_mb=shard_mb, seed=seed)
 
 
 class EpisodeWriter:
@@ -89,8 +90,11 @@ class EpisodeWriter:
     def __init__(self, path: str | Path, *, fps: float, arrays: Sequence[str], sensor: str,
                  name: str | None, calibration_sha256: str | None, resume: bool,
                  overwrite: bool, dataset_version: str, compression_level: int,
-                 shard_mb: float) -> None:
+                 shard_mb: float, seed: int = 0) -> None:
         self.out = Path(path).resolve()
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise VtsError(f"create: seed must be a non-negative integer, got {seed!r:.80}")
+        self.seed = seed
         self.fps = check_fps(fps)
         self.arrays = check_arrays_choice(arrays)
         self.sensor = check_name(sensor, "sensor", "create")
@@ -346,7 +350,8 @@ class EpisodeWriter:
                            "then save_episode, first)", self.out)
         self._check_out()
         finish_episodes(self.stage, self.out, self._frames, self._records, name=self.name,
-                        dataset_version=self.dataset_version, shard_mb=self.shard_mb)
+                        dataset_version=self.dataset_version, shard_mb=self.shard_mb,
+                        seed=self.seed)
         self.close()
         return self.out
 

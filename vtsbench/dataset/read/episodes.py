@@ -9,12 +9,14 @@ at that anchor (pad="drop"). Windows are index arithmetic on `index/frames.parqu
 timestamps: nothing is read until a window is, and `read(items)` reads many windows' frames
 in one batched call (the loader's run-based read of the Zarr store, each frame read once).
 Labels come as int8 arrays with -1 where unknown (state: index in labels.STATES).
+`split(name, part)` is the episodes of one part of a split of episodes (splits/episodes.py):
+its windows are windows of those episodes only, so no window leaks across parts.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -28,12 +30,16 @@ from ..format.episodes import (
     read_table,
 )
 from ..format.layout import DECODED_DTYPES, EPISODES, EPISODES_GROUP, EPISODES_INDEX, FRAMES_INDEX
+from ..format.records import part_key
+from ..splits.episodes import EPISODE
 from .arrays import ITER_BYTES, check_arrays
 
 if TYPE_CHECKING:
     import pyarrow as pa
+    import torch.utils.data
 
     from ..format.info import DatasetInfo
+    from ..format.records import SplitFile
     from .loader import KindStore
     from .location import Location
 
@@ -83,12 +89,15 @@ def store_table(episodes: pa.Table, frames: pa.Table) -> pa.Table:
                      "sample_id": names})
 
 
-def open_episodes(loc: Location, info: DatasetInfo, store_class: type[KindStore]) -> Episodes:
+def open_episodes(loc: Location, info: DatasetInfo, store_class: type[KindStore],
+                  split_file: Callable[[str], SplitFile] | None = None) -> Episodes:
     """Every episode of a dataset (the loader's `ds.episodes`); store_class: the loader's
-    KindStore, which reads the frames store."""
+    KindStore, which reads the frames store; split_file: the loader's reader of a checked
+    split file (for `split`)."""
     episodes, frames = read_tables(loc, info)
     store = store_class(loc, EPISODES, info, store_table(episodes, frames))
     data = EpisodeData(episodes, frames, store)
+    data.split_file = split_file
     return Episodes(data, np.arange(len(episodes), dtype=np.int64))
 
 
@@ -113,6 +122,11 @@ class EpisodeData:
         self.extra = {n: frames.column(n).to_numpy(zero_copy_only=False)
                       for n in frames.column_names[len(FRAME_COLUMNS):]}
         self.rows = episodes.to_pylist()
+        self.split_file: Callable[[str], SplitFile] | None = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled without the loader's split reader (a worker reads windows, not splits)."""
+        return {**self.__dict__, "split_file": None}
 
     def per_frame(self, rows: np.ndarray) -> dict[str, Any]:
         """Timestamps, labels and extra values of frame rows (any shape)."""
@@ -197,6 +211,23 @@ class Episodes:
             keep = keep[[self._data.rows[p][name] in values for p in keep]] if len(keep) \
                 else keep
         return Episodes(self._data, keep)
+
+    def split(self, name: str, part: str) -> Episodes:
+        """The episodes of this view in one part of a split of episodes (`ds.splits`), read and
+        leak-checked as the loader checks every split file."""
+        d = self._data
+        if d.split_file is None:
+            raise VtsError("splits are read from a loaded dataset's ds.episodes")
+        split = d.split_file(name)
+        if split.kind != EPISODE:
+            raise VtsError(f"split {name!r} is a split of {split.kind} samples: "
+                           f"ds.split({name!r}, {part!r:.80})")
+        if part not in split.parts:
+            raise VtsError(f"split {name!r} has no part {part!r:.80}; parts: "
+                           f"{', '.join(sorted(split.parts, key=part_key))}")
+        want = set(split.parts[part])
+        return Episodes(d, self._pos[[d.rows[p]["episode_id"] in want for p in self._pos]]
+                        if len(self._pos) else self._pos)
 
     def windows(self, length: int = 8, stride: int | None = None, *,
                 delta_timestamps: Sequence[float] | None = None, pad: str = "drop",
@@ -352,6 +383,22 @@ class Windows:
         data = d.store.read(rows.reshape(-1), names)
         return {**out, **{n: a.reshape(len(pos), self.length, *a.shape[1:])
                           for n, a in data.items()}}
+
+    def to_torch(self, modality: str = "rgb", size: tuple[int, int] | None = None,
+                 transform: Any = None, targets: Sequence[str] = (), *, transforms: Any = None,
+                 target_transform: Any = None, dtype: str = "uint8"
+                 ) -> torch.utils.data.Dataset:
+        """A torch Dataset of (tensor (T, C, H, W), target dict) over these windows, a batch
+        read in one `read` call; as View.to_torch (uint8 resized in the worker with OpenCV
+        INTER_AREA, or dtype="float32"); see vtsbench.dataset.read.torch_dataset.TorchWindows."""
+        try:
+            from .torch_dataset import TorchWindows
+        except ModuleNotFoundError as e:
+            raise VtsError(f"to_torch needs {e.name!r}: pip install 'vtsbench[torch]'") from None
+
+        return TorchWindows(self, modality=modality, size=size, transform=transform,
+                            targets=targets, transforms=transforms,
+                            target_transform=target_transform, dtype=dtype)
 
     def __iter__(self) -> Iterator[dict[str, Any]]:
         """Windows in order, read a batch at a time."""

@@ -34,6 +34,7 @@ from ..format.layout import (
 )
 from ..format.problems import short
 from ..format.records import SplitFile, part_key
+from ..splits.episodes import EPISODE, split_table
 from ..splits.files import read_split, split_limits
 from ..splits.leaks import split_problems
 from . import store
@@ -291,11 +292,15 @@ class VtsDataset:
                            f"{', '.join(self.splits) or 'none'}")
         if name not in self._splits:
             rel = split_path(name)
-            max_bytes, max_ids = split_limits(sum(len(k.rows) for k in self._kinds.values()))
+            n_episodes = self.info.episodes.episodes if self.info.episodes is not None else 0
+            max_bytes, max_ids = split_limits(sum(len(k.rows) for k in self._kinds.values())
+                                              + n_episodes)
             split = self.loc.checked(rel, functools.partial(
                 read_split, expected_sha256=self.info.splits[name], max_bytes=max_bytes,
                 max_ids=max_ids))
             tables = {k: ks.table for k, ks in self._kinds.items()}
+            if split.kind == EPISODE:  # a split of episodes: their ids, objects, sessions
+                tables[EPISODE] = split_table(self.episodes.index)
             bad, leaks = split_problems(split, name, self.info, tables)
             if leaks and not self.allow_leaks:
                 bad.append(f"leak: {leaks[0]}" + (f" (and {len(leaks) - 1} more)"
@@ -333,6 +338,9 @@ class VtsDataset:
     def split(self, name: str, part: str) -> View:
         """The samples of one part of a split, from the kind the split is made of."""
         split = self.split_file(name)
+        if split.kind == EPISODE:
+            raise VtsError(f"split {name!r} is a split of episodes: "
+                           f"ds.episodes.split({name!r}, {short(part, 80)!r})")
         return View(self, split.kind, self._part_positions(split, part))
 
     @property
@@ -342,7 +350,7 @@ class VtsDataset:
         if "_episodes" not in self.__dict__:
             from .episodes import open_episodes
 
-            self._episodes = open_episodes(self.loc, self.info, KindStore)
+            self._episodes = open_episodes(self.loc, self.info, KindStore, self.split_file)
         return self._episodes
 
     def by_id(self, sample_id: str, arrays: Sequence[str] | None = None) -> dict[str, Any]:

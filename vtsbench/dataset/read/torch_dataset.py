@@ -25,6 +25,7 @@ from ...errors import VtsError
 from ...labels import DIRECTION_NAMES, MIRROR_X, STATES
 
 if TYPE_CHECKING:
+    from .episodes import Windows
     from .view import View
 
 MODALITIES = ("rgb", "depth", "rgbd")
@@ -412,3 +413,91 @@ class HorizontalFlip:
         if isinstance(out.get("motion_mm"), torch.Tensor):
             out["motion_mm"] = out["motion_mm"] * torch.tensor([-1.0, 1.0])
         return out
+
+
+class TorchWindows(Dataset):
+    """(tensor, target) items of episode windows (`ds.episodes.windows(...).to_torch()`).
+
+    x: rgb uint8 T x C x H x W, depth float32 mm T x 1 x H x W, rgbd a dict of the two, `size`
+    resizing in the worker with OpenCV INTER_AREA (masks nearest) as TorchView does;
+    dtype="float32" gives the same frames as float32 (`as_float`: rgb / 255, rgbd 4 channels).
+    target: episode_id, episode_index, and T each: frame_index, timestamps (float64), state and
+    direction (int64, -1 where unknown), pad_mask, and the arrays named in `targets` ("depth" in
+    mm, "contact" bool) as T x H x W. A batch (`__getitems__`) is one `Windows.read` call (each
+    frame read once however many of its windows hold it). Transforms as in TorchView."""
+
+    def __init__(self, windows: Windows, modality: str = "rgb",
+                 size: Sequence[int] | None = None,
+                 transform: Callable[[Any], Any] | None = None, targets: Sequence[str] = (),
+                 transforms: Callable[[dict[str, Any]], dict[str, Any]] | None = None,
+                 target_transform: Callable[[Any], Any] | None = None,
+                 dtype: str = "uint8") -> None:
+        if modality not in MODALITIES:
+            raise VtsError(f"unsupported modality {modality!r}; use one of "
+                           f"{', '.join(MODALITIES)}")
+        if dtype not in DTYPES:
+            raise VtsError(f"unsupported dtype {dtype!r}; use {' or '.join(DTYPES)}")
+        bad = [t for t in targets if t not in TARGET_ARRAYS]
+        if bad:
+            raise VtsError(f"unknown target array {bad[0]!r}; use {', '.join(TARGET_ARRAYS)}")
+        from .arrays import check_arrays
+
+        info = windows._data.store.info
+        self.inputs = {"rgb": ("rgb",), "depth": ("depth",), "rgbd": ("rgb", "depth")}[modality]
+        check_arrays(info, self.inputs, f"modality {modality!r}")
+        for name in targets:
+            check_arrays(info, (name,), f"target {name!r}")
+        self.windows, self.modality, self.dtype = windows, modality, dtype
+        self.size, self.targets = _check_size(size), tuple(targets)
+        self.transform, self.transforms, self.target_transform = (transform, transforms,
+                                                                  target_transform)
+        self.arrays = tuple(dict.fromkeys(self.inputs + self.targets))
+
+    def __len__(self) -> int:
+        return len(self.windows)
+
+    def __repr__(self) -> str:
+        return (f"TorchWindows({len(self)} windows of {self.windows.length} frames, "
+                f"modality={self.modality}, size={self.size}, dtype={self.dtype})")
+
+    def __getitem__(self, i: int) -> tuple[Any, dict[str, Any]]:
+        return self.__getitems__([i])[0]
+
+    def __getitems__(self, items: Sequence[int]) -> list[tuple[Any, dict[str, Any]]]:
+        """Several items from one `Windows.read` of their frames, resized in one pass."""
+        items = [int(i) for i in items]
+        if not items:
+            return []
+        b = self.windows.read(items, self.arrays)
+        size = self.size
+        t: dict[str, torch.Tensor] = {}
+        for name in self.arrays:
+            a = b[name]
+            if name == "rgb":
+                a = a if size is None else resize_frames(a, size, channels=True)
+                t[name] = torch.from_numpy(channels_first(a))
+            else:
+                a = a if size is None else resize_frames(a, size)
+                t[name] = torch.from_numpy(np.ascontiguousarray(a))
+        out = []
+        for j in range(len(items)):
+            x: Any = {n: t[n][j] for n in self.inputs}
+            if "depth" in x:
+                x["depth"] = x["depth"].unsqueeze(-3)
+            if self.dtype == "float32":
+                x = as_float(x) if self.modality == "rgbd" else as_float(x[self.modality])
+            else:
+                x = x.pop(self.modality) if self.modality in x else x
+            target: dict[str, Any] = {
+                "episode_id": b["episode_id"][j], "episode_index": int(b["episode_index"][j]),
+                "frame_index": torch.from_numpy(b["frame_index"][j].copy()),
+                "timestamps": torch.from_numpy(b["timestamps"][j].copy()),
+                "state": torch.from_numpy(b["state"][j].astype(np.int64)),
+                "direction": torch.from_numpy(b["direction"][j].astype(np.int64)),
+                "pad_mask": torch.from_numpy(b["pad_mask"][j].copy())}
+            for name in self.targets:
+                target[name] = t[name][j].clone() if name in self.inputs else t[name][j]
+            out.append(self._item(x, target))
+        return out
+
+    _item = TorchView._item  # transforms, then transform, then target_transform

@@ -170,6 +170,8 @@ def check_splits(root: Path, info: DatasetInfo, index: dict[str, Any],
     schema, ids known, part sizes, leaks), and its sha256 against info.json."""
     import hashlib
 
+    from ..format.episodes import read_table
+    from ..splits.episodes import EPISODE, episode_leaks, split_table
     from ..splits.files import read_split, split_limits
     from ..splits.leaks import split_problems
 
@@ -195,6 +197,13 @@ def check_splits(root: Path, info: DatasetInfo, index: dict[str, Any],
             bad, leaks = split_problems(sp, name, info, index)
             report.problems += [f"{rel}: {b}" for b in bad]
             report.problems += [f"{rel}: leak: {name}: {x}" for x in leaks]
+        elif sp.kind == EPISODE and info.episodes is not None:  # splits over episodes
+            try:
+                episodes = read_table(root, "episodes")
+            except VtsError:
+                continue  # reported with the indexes
+            report.problems += [f"{rel}: leak: {name}: {x}"
+                                for x in episode_leaks(sp, split_table(episodes))]
     listed = set(info.splits)
     if folder.is_dir():
         extra = [p.name for p in sorted(folder.glob("*.json")) if p.stem not in listed]
