@@ -44,6 +44,17 @@ def frame_numbers(t: int, k: int) -> np.ndarray:
     return np.linspace(0, t - 1, k).round().astype(np.int64)
 
 
+def _check_choices(modality: str, dtype: str, targets: Sequence[str]) -> None:
+    """The modality, dtype and target arrays a torch view is asked for, each one of its set."""
+    if modality not in MODALITIES:
+        raise VtsError(f"unsupported modality {modality!r}; use one of {', '.join(MODALITIES)}")
+    if dtype not in DTYPES:
+        raise VtsError(f"unsupported dtype {dtype!r}; use {' or '.join(DTYPES)}")
+    bad = [t for t in targets if t not in TARGET_ARRAYS]
+    if bad:
+        raise VtsError(f"unknown target array {bad[0]!r}; use {', '.join(TARGET_ARRAYS)}")
+
+
 def _check_size(size: Any) -> tuple[int, int] | None:
     if size is None:
         return None
@@ -140,14 +151,7 @@ class TorchView(Dataset):
                  transforms: Callable[[dict[str, Any]], dict[str, Any]] | None = None,
                  target_transform: Callable[[Any], Any] | None = None,
                  dtype: str = "uint8") -> None:
-        if modality not in MODALITIES:
-            raise VtsError(f"unsupported modality {modality!r}; use one of "
-                           f"{', '.join(MODALITIES)}")
-        if dtype not in DTYPES:
-            raise VtsError(f"unsupported dtype {dtype!r}; use {' or '.join(DTYPES)}")
-        bad = [t for t in targets if t not in TARGET_ARRAYS]
-        if bad:
-            raise VtsError(f"unknown target array {bad[0]!r}; use {', '.join(TARGET_ARRAYS)}")
+        _check_choices(modality, dtype, targets)
         if frames is not None and view.kind != "slip":
             raise VtsError("frames apply to slip sequences only")
         self.view, self.modality, self.transform = view, modality, transform
@@ -432,14 +436,7 @@ class TorchWindows(Dataset):
                  transforms: Callable[[dict[str, Any]], dict[str, Any]] | None = None,
                  target_transform: Callable[[Any], Any] | None = None,
                  dtype: str = "uint8") -> None:
-        if modality not in MODALITIES:
-            raise VtsError(f"unsupported modality {modality!r}; use one of "
-                           f"{', '.join(MODALITIES)}")
-        if dtype not in DTYPES:
-            raise VtsError(f"unsupported dtype {dtype!r}; use {' or '.join(DTYPES)}")
-        bad = [t for t in targets if t not in TARGET_ARRAYS]
-        if bad:
-            raise VtsError(f"unknown target array {bad[0]!r}; use {', '.join(TARGET_ARRAYS)}")
+        _check_choices(modality, dtype, targets)
         from .arrays import check_arrays
 
         info = windows._data.store.info
