@@ -1,7 +1,7 @@
 """Every way to read a built dataset, in one run, against the Zarr loader: samples/s, ratios, CPU.
 
 Run: .venv/bin/python benchmarks/loader.py [--sequences 36] [--size 480x640] [--repeats 3]
-     [--workers 2] [--dataset BUILT_DATASET] [--formats]
+     [--workers 2] [--dataset BUILT_DATASET] [--formats] [--torch-only]
 
 Builds a dataset from simulated recordings (simulate, calibrate with lut, build: hf.py's
 make_dataset) in a temporary folder, writes its Hugging Face copy (export-hf), then reads every
@@ -20,11 +20,13 @@ page cache is warm, so this measures decoding, not the disk):
   and the same with `streaming=True` (iterated);
 - the first `load_dataset` call: seconds to build the Arrow cache, its bytes against the parquet's.
 
-Every reader's arrays are checked against the loader's before timing. CPU is the process's and
-its finished children's (DataLoader workers) user + system time per sample: other jobs on a
+Every reader's arrays are checked against the loader's before timing. CPU is user + system time
+per sample of the process and its children (DataLoader workers: those that ended, and the live
+ones of a persistent DataLoader, read from /proc), with the workers' part apart: other jobs on a
 shared machine slow the wall clock, not this. --formats adds the earlier format comparison (a
-PNG folder and a parquet of Image() read through datasets). Prints markdown tables and the
-machine; removes everything it wrote.
+PNG folder and a parquet of Image() read through datasets); --torch-only times the Zarr loader
+and the torch rows alone (no Hugging Face copy). Prints markdown tables and the machine;
+removes everything it wrote.
 """
 
 from __future__ import annotations
@@ -60,11 +62,23 @@ SMALL = (224, 224)
 HAS_DTYPE = "dtype" in inspect.signature(View.to_torch).parameters
 
 
-def cpu_s() -> float:
-    """User + system seconds of this process and its finished children (DataLoader workers)."""
+def cpu_s() -> tuple[float, float]:
+    """User + system seconds of this process and of its children (DataLoader workers): the
+    ended ones (getrusage) and the live ones (/proc/PID/stat: a persistent DataLoader's)."""
+    import multiprocessing
+
+    live = multiprocessing.active_children()  # reaps the ended ones first
     own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(
         resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+    workers = kids.ru_utime + kids.ru_stime
+    tick = os.sysconf("SC_CLK_TCK")
+    for proc in live:
+        try:
+            stat = Path(f"/proc/{proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        workers += (int(stat[11]) + int(stat[12])) / tick  # utime, stime
+    return own.ru_utime + own.ru_stime, workers
 
 
 # -- the readers --------------------------------------------------------------------------
@@ -132,6 +146,35 @@ def rows_job(rows: Callable[[], Any], scale_mm: float) -> Callable[[], int]:
     return run
 
 
+def shared_memory_ms(nbytes: int, repeats: int = 5) -> tuple[float, float, float, float]:
+    """CPU ms to move nbytes into torch's shared memory, as a DataLoader worker does with each
+    batch: (allocate, allocate and write, write into fresh numpy memory, write into reused
+    memory), best of repeats."""
+    import torch
+
+    src = np.random.default_rng(0).integers(0, 255, nbytes, dtype=np.uint8)
+    reused = np.empty_like(src)
+
+    def shm(write: bool) -> None:
+        t = torch.from_numpy(np.empty(0, np.uint8)).set_(
+            torch.UntypedStorage._new_shared(nbytes), 0, (nbytes,))
+        if write:
+            np.copyto(t.numpy(), src)
+
+    jobs = (lambda: shm(False), lambda: shm(True), lambda: np.copyto(np.empty_like(src), src),
+            lambda: np.copyto(reused, src))
+    out = []
+    for job in jobs:
+        job()
+        b = float("inf")
+        for _ in range(repeats):
+            c0 = time.process_time()
+            job()
+            b = min(b, time.process_time() - c0)
+        out.append(1e3 * b)
+    return out[0], out[1], out[2], out[3]
+
+
 def check_readers(view: View, order: Sequence[int], hf_rows: dict[str, Callable[[], Any]],
                   scale_mm: float) -> None:
     """Every reader gives the loader's arrays, sample by sample (before any timing)."""
@@ -157,20 +200,22 @@ def check_readers(view: View, order: Sequence[int], hf_rows: dict[str, Callable[
 
 
 def best(jobs: dict[str, Callable[[], int]], n: int, repeats: int
-         ) -> dict[str, tuple[float, float]]:
-    """(samples/s, CPU ms per sample) of every job, best of repeats; the jobs take turns
-    within each repeat so that load from other processes falls on all of them alike."""
+         ) -> dict[str, tuple[float, float, float]]:
+    """(samples/s, CPU ms per sample, of which in workers) of every job, best of repeats (the
+    CPU of the repeat with the least); the jobs take turns within each repeat so that load
+    from other processes falls on all of them alike."""
     wall = dict.fromkeys(jobs, float("inf"))
-    cpu = dict.fromkeys(jobs, float("inf"))
+    cpu = dict.fromkeys(jobs, (float("inf"), 0.0))
     for _ in range(repeats):
         for key, job in jobs.items():
-            t0, c0 = time.perf_counter(), cpu_s()
+            t0, (m0, w0) = time.perf_counter(), cpu_s()
             got = job()
-            w, c = time.perf_counter() - t0, cpu_s() - c0
+            w, (m1, w1) = time.perf_counter() - t0, cpu_s()
             if got != n:
                 raise SystemExit(f"{key}: {got} samples, expected {n}")
+            c = (m1 - m0 + w1 - w0, w1 - w0)
             wall[key], cpu[key] = min(wall[key], w), min(cpu[key], c)
-    return {k: (n / wall[k], 1e3 * cpu[k] / n) for k in jobs}
+    return {k: (n / wall[k], 1e3 * cpu[k][0] / n, 1e3 * cpu[k][1] / n) for k in jobs}
 
 
 # -- the earlier format comparison (--formats) --------------------------------------------
@@ -269,7 +314,7 @@ def formats_report(view: View, work: Path, order: Sequence[int], repeats: int) -
     base = rates["vtsbench loader (Zarr, zstd)"][0]
     lines = ["", "| format (rgb + depth, shuffled) | on disk (MB) | samples/s | loader / this |",
              "|---|---:|---:|---:|"]
-    for (name, (rate, _c)), b in zip(rates.items(), sizes, strict=True):
+    for (name, (rate, _c, _w)), b in zip(rates.items(), sizes, strict=True):
         lines.append(f"| {name} | {b / 1e6:.0f} | {rate:.1f} | {base / rate:.1f}x |")
     return lines
 
@@ -277,33 +322,23 @@ def formats_report(view: View, work: Path, order: Sequence[int], repeats: int) -
 # -- the run ------------------------------------------------------------------------------
 
 
-def run(work: Path, a: argparse.Namespace, size: tuple[int, int]) -> str:
-    """Build (unless given a dataset), export, time every reader; returns the report."""
+def hf_setup(root: Path, work: Path, view: View, order: Sequence[int], workers: int
+             ) -> tuple[dict[str, Callable[[], Any]], list[str]]:
+    """Export the Hugging Face copy and build its Arrow cache: the Hugging Face readers, and
+    the table of the copy's costs and sizes."""
     import datasets
 
     from vtsbench.dataset.format.layout import HUB_DIR
     from vtsbench.dataset.tools.hub import export_hf
 
     datasets.disable_progress_bars()
-    load0 = os.getloadavg()[0]
-    if a.dataset:
-        root = work / "dataset"
-        shutil.copytree(a.dataset, root)
-        build_s = float("nan")
-    else:
-        root, build_s = make_dataset(work, a.sequences, 2, size, a.workers)
     t0 = time.perf_counter()
-    export_hf(root, workers=a.workers)
+    export_hf(root, workers=workers)
     export_s = time.perf_counter() - t0
-    ds = vtsbench.load(root)
-    view = ds.slip
-    n, scale = len(view), ds.info.depth_scale_mm
-    order = [int(i) for i in np.random.default_rng(0).permutation(n)]
-
     cache = work / "cache"
-    t0, c0 = time.perf_counter(), cpu_s()
+    t0, c0 = time.perf_counter(), sum(cpu_s())
     arrow = datasets.load_dataset(str(root), "slip_all", split="full", cache_dir=str(cache))
-    prepare_s, prepare_cpu = time.perf_counter() - t0, cpu_s() - c0
+    prepare_s, prepare_cpu = time.perf_counter() - t0, sum(cpu_s()) - c0
     files = sorted((root / HUB_DIR / "slip").glob("*.parquet"))
     parquet_b = sum(p.stat().st_size for p in files)
     cache_b = sum(p.stat().st_size for p in cache.rglob("*.arrow"))
@@ -321,13 +356,47 @@ def run(work: Path, a: argparse.Namespace, size: tuple[int, int]) -> str:
         "`load_dataset(streaming=True)`, no format": lambda: stream(None),
         "`load_dataset(streaming=True)`, `.with_format(\"numpy\")`": lambda: stream("numpy"),
     }
+    lines = ["", "| Hugging Face copy | value |", "|---|---:|",
+             f"| `vtsbench export-hf` (s) | {export_s:.1f} |",
+             f"| first `load_dataset` (slip_all): Arrow cache build (s, wall / CPU) | "
+             f"{prepare_s:.2f} / {prepare_cpu:.2f} |",
+             f"| parquet it reads (MB) | {parquet_b / 1e6:.1f} |",
+             f"| Arrow cache it writes (MB) | {cache_b / 1e6:.1f} |",
+             f"| cache / parquet | {cache_b / parquet_b:.3f} |",
+             f"| Zarr arrays, `data/slip.zarr` (MB) | "
+             f"{folder_bytes(root / 'data' / 'slip.zarr') / 1e6:.1f} |"]
+    for col, b in sorted(column_bytes(root / HUB_DIR / "slip").items(), key=lambda kv: -kv[1]):
+        if b > 1e5:
+            lines.append(f"| parquet column `{col}` (MB) | {b / 1e6:.1f} |")
+    return hf_rows, lines
+
+
+def run(work: Path, a: argparse.Namespace, size: tuple[int, int]) -> str:
+    """Build (unless given a dataset), export (unless --torch-only), time every reader; returns
+    the report."""
+    load0 = os.getloadavg()[0]
+    if a.dataset:
+        root = work / "dataset"
+        shutil.copytree(a.dataset, root)
+        build_s = float("nan")
+    else:
+        root, build_s = make_dataset(work, a.sequences, 2, size, a.workers)
+    ds = vtsbench.load(root)
+    view = ds.slip
+    n, scale = len(view), ds.info.depth_scale_mm
+    order = [int(i) for i in np.random.default_rng(0).permutation(n)]
+    hf_rows: dict[str, Callable[[], Any]] = {}
+    hf_lines: list[str] = []
+    if not a.torch_only:
+        hf_rows, hf_lines = hf_setup(root, work, view, order, a.workers)
     check_readers(view, order, hf_rows, scale)
     base = {"rgb": "Zarr loader, rgb", "rgbd": "Zarr loader, rgb + depth",
             "all": "Zarr loader, rgb + depth + contact"}
     jobs: dict[str, Callable[[], int]] = {
         base["rgb"]: zarr_job(view, order, ("rgb",)),
-        base["rgbd"]: zarr_job(view, order, ("rgb", "depth")),
-        base["all"]: zarr_job(view, order, ALL)}
+        base["rgbd"]: zarr_job(view, order, ("rgb", "depth"))}
+    if hf_rows:
+        jobs[base["all"]] = zarr_job(view, order, ALL)
     torch_rows = []
     specs = [(m, None) for m in ("rgb", "rgbd")] + [("rgbd", SMALL)]
     for modality, sz in specs:
@@ -349,34 +418,30 @@ def run(work: Path, a: argparse.Namespace, size: tuple[int, int]) -> str:
     frames = ds.info.frames_per_sequence
     lines = [f"{n} slip samples of {frames} x {h} x {w} (rgb, depth, contact), shuffled order; "
              f"best of {a.repeats}; load average {load0:.1f} at the start.", "",
-             "| reader | samples/s | / Zarr loader | CPU ms per sample |", "|---|---:|---:|---:|"]
+             "| reader | samples/s | / Zarr loader | CPU ms per sample (in workers) |",
+             "|---|---:|---:|---:|"]
 
     def row(name: str, base: str) -> str:
-        rate, cpu = rates[name]
-        cpu_text = "n/a" if "persistent" in name else f"{cpu:.0f}"  # workers not yet ended
+        rate, cpu, workers = rates[name]
+        cpu_text = f"{cpu:.0f}" + (f" ({workers:.0f})" if workers >= 0.5 else "")
         return f"| {name} | {rate:.1f} | {rate / rates[base][0]:.2f}x | {cpu_text} |"
 
-    lines += [row(b, b) for b in base.values()]
+    lines += [row(b, b) for b in base.values() if b in rates]
     lines += [row(k, b) for k, b in torch_rows]
     lines += [row(k, base["all"]) for k in hf_rows]
     lines += ["", "Ratios: each torch row to the Zarr loader reading the same arrays, the "
               "others to it reading rgb + depth + contact. DataLoader batch 4; an rgbd sample at "
               f"{h}x{w} is "
               f"{frames * h * w * (3 + 4) / 1e6:.1f} MB as uint8 rgb + float32 mm depth, "
-              f"{frames * h * w * 16 / 1e6:.1f} MB as float32.", "",
-              "| Hugging Face copy | value |", "|---|---:|",
-              f"| `vtsbench build` (s) | {build_s:.1f} |",
-              f"| `vtsbench export-hf` (s) | {export_s:.1f} |",
-              f"| first `load_dataset` (slip_all): Arrow cache build (s, wall / CPU) | "
-              f"{prepare_s:.2f} / {prepare_cpu:.2f} |",
-              f"| parquet it reads (MB) | {parquet_b / 1e6:.1f} |",
-              f"| Arrow cache it writes (MB) | {cache_b / 1e6:.1f} |",
-              f"| cache / parquet | {cache_b / parquet_b:.3f} |",
-              f"| Zarr arrays, `data/slip.zarr` (MB) | "
-              f"{folder_bytes(root / 'data' / 'slip.zarr') / 1e6:.1f} |"]
-    for col, b in sorted(column_bytes(root / HUB_DIR / "slip").items(), key=lambda kv: -kv[1]):
-        if b > 1e5:
-            lines.append(f"| parquet column `{col}` (MB) | {b / 1e6:.1f} |")
+              f"{frames * h * w * 16 / 1e6:.1f} MB as float32. `vtsbench build`: "
+              f"{build_s:.1f} s."]
+    nbytes = frames * h * w * (3 + 4)
+    alloc, shm, fresh, reused = shared_memory_ms(nbytes)
+    lines += ["", f"Moving one rgbd sample ({nbytes / 1e6:.1f} MB) into torch's shared memory, "
+              f"as a DataLoader worker does: {shm:.1f} ms of CPU ({alloc:.1f} ms allocating: "
+              f"fallocate; then writing its 4 KB pages), against {fresh:.1f} ms into fresh "
+              f"numpy memory and {reused:.1f} ms into reused memory."]
+    lines += hf_lines
     if a.formats:
         lines += formats_report(view, work, order, a.repeats)
     lines += ["", f"Machine: {machine()}."]
@@ -396,6 +461,8 @@ def main() -> None:
                     help="Use a copy of this built dataset instead of building one.")
     ap.add_argument("--formats", action="store_true",
                     help="Also compare with a PNG folder and a parquet of Image() PNGs.")
+    ap.add_argument("--torch-only", action="store_true",
+                    help="Time the Zarr loader and the torch rows alone (no Hugging Face copy).")
     a = ap.parse_args()
     size = tuple(int(v) for v in a.size.lower().split("x"))
     work = Path(tempfile.mkdtemp(prefix="vtsbench-loader-", dir=a.workdir))

@@ -10,4 +10,5 @@ pytest_plugins = [
     "tests.fixtures.datasets",
     "tests.fixtures.serve",
     "tests.fixtures.recipes",
+    "tests.fixtures.views",
 ]

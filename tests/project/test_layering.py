@@ -96,7 +96,8 @@ PACKAGE_STAGES: tuple[tuple[str, ...], ...] = (
     ("dataset.splits",),
     ("dataset.read",),
     ("dataset.build",),
-    ("dataset.tools", "sim.benchmark"),  # benchmark: simulate, calibrate and build in one run
+    ("dataset.tools", "sim.benchmark",  # benchmark: simulate, calibrate and build in one run
+     "sim.episode_dataset"),  # simulated takes written through vtsbench.create
     ("transforms",),
     ("models",),
     ("recipes", "training"),

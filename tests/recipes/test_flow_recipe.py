@@ -46,6 +46,47 @@ def test_direction_follows_the_project_convention(dx: int, dy_rows: int, cls: in
     assert feats[3] > 0.5  # coherent motion
 
 
+def test_features_combine_each_pair_and_the_percentile_is_numpys() -> None:
+    """The features are combined from per-pair statistics (what the monitor keeps from one
+    window to the next): the means over every pixel, and a 90th percentile of the magnitude
+    found from histograms that equals numpy's over all pairs at once."""
+    from vtsbench.recipes.builtin import flow as flow_mod
+
+    rng = np.random.default_rng(3)
+    flows = [flow_mod.sequence_flow(_shifted(2, -1)),
+             rng.normal(0, 2, (7, 30, 40, 2)).astype(np.float32),
+             np.zeros((3, 20, 20, 2), np.float32),  # a still gel: all zero
+             np.round(rng.normal(0, 1, (4, 25, 30, 2))).astype(np.float32)]  # many ties
+    flows[2][1, 3, 4] = (0.5, 0.0)
+    for flow in flows:
+        feats, angle = flow_mod.flow_features(flow)
+        fx, fy = flow[..., 0].astype(np.float64), flow[..., 1].astype(np.float64)
+        mag = np.hypot(flow[..., 0], flow[..., 1])
+        assert feats[1] == pytest.approx(float(np.percentile(mag, 90)), rel=1e-6, abs=1e-12)
+        assert feats[0] == pytest.approx(mag.mean(dtype=np.float64), rel=1e-9, abs=1e-12)
+        net = math.hypot(fx.mean(), fy.mean())
+        assert feats[2] == pytest.approx(net, rel=1e-9, abs=1e-12)
+        div = np.gradient(fx, axis=2) + np.gradient(fy, axis=1)
+        assert feats[4] == pytest.approx(div.mean(), rel=1e-6, abs=1e-9)
+        assert feats[5] == pytest.approx(np.abs(div).mean(), rel=1e-6, abs=1e-9)
+        assert 0 <= angle < 360
+
+
+def test_the_global_shift_leaves_the_grey_frames_it_is_given_as_they_were() -> None:
+    """OpenCV's phaseCorrelate windows its inputs in place: the frames a stream keeps from one
+    window to the next must come back unchanged, and give the shift of fresh ones."""
+    from vtsbench.recipes.builtin import flow as flow_mod
+
+    rgb = _shifted(2, 1, frames=6)
+    for slope in (False, True):
+        grey = [g.astype(np.float32) for g in flow_mod._gray(rgb, 1.0)]
+        kept = [g.copy() for g in grey]
+        got = flow_mod.global_shift(rgb, 1.0, slope, grey)
+        assert all(np.array_equal(a, b) for a, b in zip(grey, kept, strict=True))
+        assert got == flow_mod.global_shift(rgb, 1.0, slope)
+        assert got[0] > 5 and got[1] > 2  # about 10 and 5 px over the 6 frames
+
+
 def test_flow_cli_end_to_end(vts_dataset: Path, tmp_path: Path) -> None:
     from safetensors import safe_open
     from typer.testing import CliRunner

@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from . import dataset, depth, evaluate, recipes, recordings
+from . import dataset, depth, episodes, evaluate, recipes, recordings, stream
 from .help import install as _install_help
 
 _install_help()
@@ -50,6 +50,7 @@ leaderboard_app.command("render")(evaluate.leaderboard_render)
 leaderboard_app.command("rescore")(evaluate.leaderboard_rescore)
 
 app.command("simulate")(recordings.simulate)
+app.command("simulate-episodes")(episodes.simulate_episodes)
 app.command("benchmark")(dataset.benchmark)
 app.command("check")(recordings.check)
 app.command("manifest")(recordings.manifest)
@@ -66,6 +67,7 @@ app.command("eval")(evaluate.eval_)
 app.add_typer(leaderboard_app, name="leaderboard")
 app.command("train")(recipes.train)
 app.command("predict")(recipes.predict)
+app.command("stream")(stream.stream)
 app.command("collect")(recordings.collect)
 
 

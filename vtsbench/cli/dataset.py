@@ -90,6 +90,13 @@ def build(
     split_file: Annotated[list[Path] | None, typer.Option(
         help="A split scheme of your own (JSON in schemas/split.schema.json); repeatable.")
     ] = None,
+    store: Annotated[Literal["samples", "episodes"], choice(
+        help="samples: every sample's frames in arrays of their own; episodes: each take "
+             "stored once, the samples views of it (format 1.3).")] = "samples",
+    video: Annotated[Literal["ffv1", "h264", "av1"] | None, choice(
+        help="With --store episodes: each take's RGB as one video file, ffv1 (lossless), h264 "
+             "(crf 18) or av1 (crf 30); depth and contact stay in Zarr. Default: RGB in Zarr.")
+    ] = None,
 ) -> None:
     """Build an RGB-D dataset (Zarr + parquet index + splits + card) from a recordings folder
     (RGB only with --no-depth).
@@ -110,7 +117,8 @@ def build(
                         version=deprecated(version, "build --version", "--dataset-version")
                         or dataset_version, compression_level=compression_level, seed=seed,
                         shard_mb=shard_mb, progress=not quiet,
-                        holdout_objects=holdout_objects, split_files=tuple(split_file or ()))
+                        holdout_objects=holdout_objects, split_files=tuple(split_file or ()),
+                        store=store, video=video)
     res = run(run_build, recordings, out, opts,
               log=lambda m: err_console.print(m, soft_wrap=True, markup=False))
     print_build(res)
@@ -137,8 +145,9 @@ def print_build(res) -> None:
         t.add_row(kind, str(res.samples[kind]), str(res.frames[kind]), str(res.shards[kind]))
     con.print(t)
     frames, size = sum(res.frames.values()), human(sum(res.bytes_on_disk.values()))
+    made = ("shards" if res.takes is None else "takes") + f" built {res.shards_built}"
     con.print(f"{frames} frames in {res.seconds:.1f} s ({frames / max(res.seconds, 1e-9):.0f}"
-              f" frames/s); shards built {res.shards_built}, kept from a partial build "
+              f" frames/s); {made}, kept from a partial build "
               f"{res.shards_kept}; {len(res.skipped)} entries skipped; splits: "
               f"{', '.join(res.splits) or 'none'}; {size} on disk")
 

@@ -16,7 +16,8 @@ ROOT = Annotated[Path, typer.Option("--root", help="Leaderboards folder.")]
 
 
 def eval_(
-    submission: Annotated[Path, typer.Argument(help="Predictions: CSV or parquet.")],
+    submission: Annotated[Path, typer.Argument(
+        help="Predictions: CSV or parquet, or a stream submission (JSON lines).")],
     dataset: Annotated[str, str_option(limit=lim.MAX_PATH_TEXT, help=(
         "Dataset folder (made by vtsbench build), or a URL as vtsbench.load takes "
         "(file://, http(s)://, s3://...)."))],
@@ -44,6 +45,13 @@ def eval_(
 
     result, _, _ = run(evaluate_submission, submission, dataset, split, part, out=out, meta=meta,
                        figures=figures)
+    if result.stream is not None:  # a stream submission (JSON lines of `vtsbench stream`)
+        from ..evaluation.stream_result import stream_line
+
+        typer.echo(f"{summary_title(result)}\n{stream_line(result.stream)}")
+        if out is not None:
+            typer.echo(f"wrote {out}/metrics.json and report.md")
+        return
     print_rows(summary_title(result), SUMMARY_HEAD, summary_rows(result))
     line = direction_line(result)
     if line is not None:

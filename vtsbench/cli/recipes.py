@@ -60,12 +60,26 @@ def predict(
         help="Method name in the metadata (default: the recipe's name).")] = None,
     seed: Annotated[int, typer.Option(min=0, max=lim.MAX_SEED,
                                       help="Training seed, for the metadata.")] = 0,
+    stream: Annotated[bool, typer.Option(
+        "--stream", help="A stream submission (JSON lines, one stream per episode of the split "
+                         "part, e.g. --split episode_unseen_objects) instead of a CSV.")] = False,
+    smoothing: Annotated[int, typer.Option(
+        min=1, max=100, help="With --stream: calls in a row before the state changes.")] = 1,
 ) -> None:
     """Predict a split part with a trained recipe; writes a submission vtsbench eval accepts.
 
     Example: [bold]vtsbench predict flow runs/flow/checkpoint.safetensors --dataset
-    data/ds --split unseen_objects --out flow.csv[/]
+    data/ds --split unseen_objects --out flow.csv[/]; streams: [bold]vtsbench predict flow
+    CKPT --dataset data/takes --split episode_unseen_objects --stream --smoothing 3 --out
+    flow.jsonl[/]
     """
+    if stream:
+        from ..recipes.stream_submission import predict_streams
+
+        sp = run(predict_streams, recipe, checkpoint, dataset, split, part, out,
+                 smoothing=smoothing, device=device)
+        typer.echo(f"wrote {sp.calls} calls on {sp.episodes} episodes to {sp.submission}")
+        return
     from ..recipes.predict import predict_submission
 
     res = run(predict_submission, recipe, checkpoint, dataset, split, out, part=part,

@@ -67,7 +67,12 @@ def add(submission: str | Path, dataset: str | Path | VtsDataset, split: str, pa
         if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,99}", name) or ".." in name:
             raise VtsError(f"{what} name {name!r} must be letters, digits, '_', '-' or '.' "
                            "(no path)")
+    from .stream import is_stream_submission
+
+    if is_stream_submission(submission):
+        return _add_stream(submission, dataset, split, part, Path(root), replace)
     result, sub, truth = evaluate_submission(submission, dataset, split, part, meta=meta)
+    assert sub is not None and truth is not None
     folder = Path(root) / _slug(truth.dataset) / split
     eid = f"{_slug(str(sub.meta['method']))}-{sub.sha256[:8]}"
     path = folder / f"{eid}.json"
@@ -87,6 +92,68 @@ def add(submission: str | Path, dataset: str | Path | VtsDataset, split: str, pa
     folder.mkdir(parents=True, exist_ok=True)
     write_text_atomic(path, json.dumps(entry, indent=1, allow_nan=False) + "\n")
     return path
+
+
+def _add_stream(submission: str | Path, dataset: str | Path | VtsDataset, split: str, part: str,
+                root: Path, replace: bool) -> Path:
+    """A stream submission's entry: its scores under `stream` (no window tasks, no stored
+    predictions: re-scoring it needs the submission file again)."""
+    from .report import _version
+    from .stream import stream_result
+
+    result = stream_result(submission, dataset, split, part, _version())
+    sr = result.stream
+    assert sr is not None
+    method = result.submission.method or sr.recipe
+    folder = root / _slug(result.dataset.name) / split
+    eid = f"{_slug(method)}-{result.submission.sha256[:8]}"
+    path = folder / f"{eid}.json"
+    if path.exists() and not replace:
+        raise VtsError("this submission is already on the leaderboard (use --overwrite)", path)
+    entry = {
+        "entry_version": ENTRY_VERSION, "id": eid,
+        "added": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+        "method": method, "recipe": sr.recipe, "seeds": [0], "meta": {},
+        "submission_sha256": result.submission.sha256, "dataset": result.dataset.to_dict(),
+        "split": split, "part": part, "metric_version": result.metric_version,
+        "vtsbench_version": result.vtsbench_version, "metrics": {}, "rescored_from": [],
+        "predictions": {"sample_ids": [], "tasks": {}}, "stream": sr.to_dict()}
+    folder.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(path, json.dumps(entry, indent=1, allow_nan=False) + "\n")
+    return path
+
+
+def stream_cell(value: Any, show: str) -> str:
+    """A stream figure as its column shows it (tasks.STREAM_COLUMNS)."""
+    if value is None:
+        return "-"
+    return {"ms": f"{value:.0f}", "frames": f"{value:.1f}", "pct": f"{100 * value:.1f}",
+            "rate": f"{value:.2f}", "int": str(value)}[show]
+
+
+def render_streams(es: list[dict[str, Any]]) -> list[str]:
+    """The stream board of one dataset/split folder: fastest median detection first."""
+    from .tasks import STREAM_COLUMNS
+
+    def key(e: dict[str, Any]) -> tuple[float, float]:
+        s = e["stream"]
+        return (s["delay_ms_p50"] if s["delay_ms_p50"] is not None else float("inf"),
+                s["false_alarms_per_min"] or 0.0)
+
+    def col(field: str, show: str) -> Callable[[dict[str, Any]], str]:
+        return lambda e: stream_cell(e["stream"].get(field), show)
+
+    cols: list[tuple[str, Callable[[dict[str, Any]], str]]] = [
+        ("method", lambda e: e["method"]), ("recipe", lambda e: e["recipe"] or "-"),
+        *((h, col(f, w)) for h, f, w in STREAM_COLUMNS),
+        ("metric version", lambda e: e["stream"]["metric_version"])]
+    rows = sorted(es, key=key)
+    return ["## Streams: how fast slip is caught", "",
+            "Detection delay from slip onset to the first slip call that holds; false alarms "
+            "per minute of static and press; missed: share of slip episodes never called "
+            "(docs/evaluation.md, Streams).", "",
+            "| " + " | ".join(c for c, _ in cols) + " |", "|---" * len(cols) + "|",
+            *("| " + " | ".join(md_cell(f(r)) for _, f in cols) + " |" for r in rows)]
 
 
 def entries(folder: Path) -> list[tuple[Path, dict[str, Any]]]:
@@ -118,8 +185,8 @@ def rescore(root: str | Path, dataset: str | Path | VtsDataset, force: bool = Fa
     changed = []
     for folder in split_folders(root):
         for path, e in entries(folder):
-            if e["dataset"]["name"] != info.name:
-                continue
+            if e["dataset"]["name"] != info.name or "stream" in e:
+                continue  # a stream entry is re-scored from its submission file
             if e["metric_version"] == M.METRIC_VERSION and not force:
                 continue
             if e["dataset"]["dataset_sha256"] != info.dataset_sha256:
@@ -217,9 +284,15 @@ def current_version(es: list[BoardEntry]) -> str:
 def render_folder(folder: Path) -> str:
     """The markdown of one dataset/split folder: the entries of the newest dataset version
     ranked, those scored on an earlier version listed apart as not comparable."""
-    every = [BoardEntry.from_dict(e) for _, e in entries(folder)]
+    docs = [e for _, e in entries(folder)]
+    streams = [e for e in docs if "stream" in e]
+    every = [BoardEntry.from_dict(e) for e in docs if "stream" not in e]
     if not every:
-        return ""
+        if not streams:
+            return ""
+        e0 = streams[0]
+        return "\n".join([f"# {md_cell(e0['dataset']['name'])} / {md_cell(e0['split'])} "
+                          f"({md_cell(e0['part'])})", "", *render_streams(streams)]) + "\n"
     version = current_version(every)
     es = [e for e in every if e.dataset.dataset_version == version]
     old = [e for e in every if e.dataset.dataset_version != version]
@@ -258,6 +331,8 @@ def render_folder(folder: Path) -> str:
                   f"Not comparable with the entries above: the dataset changed (version "
                   f"{md_cell(version)} is current). Kept for the record; submit again on the "
                   "current version to be ranked.", "", *_table(cols_old, old)]
+    if streams:
+        lines += ["", *render_streams(streams)]
     return "\n".join(lines) + "\n"
 
 

@@ -160,8 +160,20 @@ def direction_line(result: EvalResult) -> str | None:
 
 
 def render_markdown(result: EvalResult, figures: list[str]) -> str:
-    """report.md: the summary, direction metrics, per-object accuracy, confusion matrices."""
+    """report.md: the summary, direction metrics, per-object accuracy, confusion matrices
+    (a stream submission: its stream section and timeline)."""
     sub, ds = result.submission, result.dataset
+    if result.stream is not None:
+        from .stream_result import stream_markdown
+
+        lines = [f"# Evaluation: {sub.method or sub.file}", "",
+                 f"- dataset: {ds.name} {ds.dataset_version} (sha256 {ds.dataset_sha256[:12]})",
+                 f"- split: {result.split} / {result.part} ({result.n_samples} episodes)",
+                 f"- submission: {sub.file} (sha256 {sub.sha256[:12]})", "",
+                 *stream_markdown(result.stream)]
+        if figures:
+            lines += ["", "## Figures", ""] + [f"![{p}]({p})" for p in figures]
+        return "\n".join(lines) + "\n"
     lines = [f"# Evaluation: {sub.method or sub.file}", "",
              f"- dataset: {ds.name} {ds.dataset_version} (sha256 {ds.dataset_sha256[:12]})",
              f"- split: {result.split} / {result.part} ({result.n_samples} {result.kind} "
@@ -288,9 +300,23 @@ def write_figures(result: EvalResult, out: Path) -> list[str]:
 def evaluate_submission(submission: str | Path, dataset: str | Path | VtsDataset, split: str,
                         part: str = "test", out: str | Path | None = None,
                         meta: str | Path | None = None, figures: bool = True
-                        ) -> tuple[EvalResult, Submission, Truth]:
+                        ) -> tuple[EvalResult, Submission | None, Truth | None]:
     """Validate and score a submission on a dataset (a folder, any URL `vtsbench.load` takes,
-    or a loaded dataset) and, when out is given, write metrics.json, report.md and PNGs."""
+    or a loaded dataset) and, when out is given, write metrics.json, report.md and PNGs.
+    A stream submission (JSON lines starting with a stream header) is scored by
+    evaluation/stream.py: the result's `stream`, with no Submission or Truth."""
+    from .stream import is_stream_submission, stream_result, write_stream_figure
+
+    if is_stream_submission(submission):
+        ds = open_dataset(dataset)
+        res = stream_result(submission, ds, split, part, _version())
+        if out is not None:
+            out = Path(out)
+            out.mkdir(parents=True, exist_ok=True)
+            names = [write_stream_figure(res, ds, submission, out)] if figures else []
+            write_text_atomic(out / "metrics.json", res.to_json())
+            write_text_atomic(out / "report.md", render_markdown(res, names))
+        return res, None, None
     ds = open_dataset(dataset)
     truth = load_truth(ds, split, part)
     sub = load_submission(submission, truth, meta)
@@ -306,7 +332,7 @@ def evaluate_submission(submission: str | Path, dataset: str | Path | VtsDataset
 
 def evaluate(submission: str | Path, dataset: str | Path, split: str, part: str = "test",
              out: str | Path | None = None, meta: str | Path | None = None,
-             figures: bool = True) -> tuple[dict[str, Any], Submission, Truth]:
+             figures: bool = True) -> tuple[dict[str, Any], Submission | None, Truth | None]:
     """`evaluate_submission` with the result as its metrics.json document (a dict)."""
     result, sub, truth = evaluate_submission(submission, dataset, split, part, out, meta,
                                              figures)

@@ -11,7 +11,10 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .stream_result import StreamResult
 
 #: A rate in [0, 1] (an angle in degrees, a pixel count) or None where undefined.
 Rate = float | None
@@ -330,19 +333,27 @@ class EvalResult:
     n_samples: int
     submission: SubmissionRef
     tasks: dict[str, TaskResult]
+    #: A stream submission's scores (kind "episode", no window tasks): evaluation/stream.py.
+    stream: StreamResult | None = None
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> EvalResult:
+        from .stream_result import StreamResult
+
         return cls(d["metric_version"], d["vtsbench_version"], DatasetRef.from_dict(d["dataset"]),
                    d["split"], d["part"], d["kind"], d["n_samples"],
-                   SubmissionRef.from_dict(d["submission"]), tasks_from_dict(d["tasks"]))
+                   SubmissionRef.from_dict(d["submission"]), tasks_from_dict(d["tasks"]),
+                   None if d.get("stream") is None else StreamResult.from_dict(d["stream"]))
 
     def to_dict(self) -> dict[str, Any]:
         """The metrics.json document, keys in the order eval writes them."""
-        return {"metric_version": self.metric_version, "vtsbench_version": self.vtsbench_version,
-                "dataset": self.dataset.to_dict(), "split": self.split, "part": self.part,
-                "kind": self.kind, "n_samples": self.n_samples,
-                "submission": self.submission.to_dict(), "tasks": tasks_to_dict(self.tasks)}
+        out = {"metric_version": self.metric_version, "vtsbench_version": self.vtsbench_version,
+               "dataset": self.dataset.to_dict(), "split": self.split, "part": self.part,
+               "kind": self.kind, "n_samples": self.n_samples,
+               "submission": self.submission.to_dict(), "tasks": tasks_to_dict(self.tasks)}
+        if self.stream is not None:
+            out["stream"] = self.stream.to_dict()
+        return out
 
     def to_json(self) -> str:
         """metrics.json's text."""

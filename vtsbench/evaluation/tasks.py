@@ -71,6 +71,25 @@ OBJECT = Task("object", "static", "class_idx", None, False, CLASSIFICATION)
 #: Every task by name, in the order results list them.
 TASKS: dict[str, Task] = {t.name: t for t in (STATE, DIRECTION, OBJECT)}
 
+#: The stream task: a monitor's calls on continuous episodes, scored against their per-frame
+#: labels (evaluation/stream.py: delay from slip onset, false alarms, missed slips, direction
+#: at detection). Its submissions are JSON lines, not CSV columns, so it is not in TASKS.
+STREAM = Task("stream", "episode", "state", STATES, False, (), headline="delay_ms_p50")
+#: Its leaderboard columns: header, the StreamResult field, how it shows (`ms` whole ms,
+#: `frames` 1 decimal, `pct` %, `rate` 2 decimals, `int`).
+STREAM_COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("debounce", "smoothing", "int"),
+    ("episodes", "n_episodes", "int"),
+    ("delay p50 (ms)", "delay_ms_p50", "ms"),
+    ("delay p90 (ms)", "delay_ms_p90", "ms"),
+    ("delay p50 (frames)", "delay_frames_p50", "frames"),
+    ("missed %", "missed", "pct"),
+    ("false alarms / min", "false_alarms_per_min", "rate"),
+    ("direction at detection %", "direction_accuracy", "pct"),
+    ("within one bin %", "direction_within_one_bin", "pct"),
+    ("fps sustained", "fps_sustained", "frames"),
+    ("latency p95 (ms)", "latency_ms_p95", "frames"))
+
 
 @dataclass(frozen=True)
 class Board:

@@ -3,6 +3,8 @@ check that an object a recipe file or entry point gives has those members."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +27,9 @@ class Recipe:
     - optional, read by `vtsbench predict` into the submission's metadata: `latency_s` (seconds
       per sample of the last predict) and `input_scale_xy` (model-input pixels per sensor pixel,
       x and y, of the last predict; the per-distance scores give pixels at the model's input).
+    - optional `window_predictor(checkpoint, device)`: a `WindowPredictor`, what the live
+      monitor (`vtsbench.recipes.monitor`, `vtsbench stream`) calls on each window of RGB
+      frames; it reads the checkpoint once, so that its calls do no file I/O.
     """
 
     name: str = "recipe"
@@ -46,6 +51,29 @@ class Recipe:
     def predict(self, checkpoint: str | Path, dataset_path: str | Path, split: str,
                 part: str = "test", *, device: str = "auto") -> list[dict[str, Any]]:
         raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class WindowPredictor:
+    """A recipe's prediction on one window of a live RGB stream, and what it needs to know.
+
+    `predict(window)`: window (frames, H, W, 3) uint8 RGB, oldest frame first -> a dict of
+    `state_probs` (len(STATES) floats), `direction` (bin 0..7) and optional `direction_probs`
+    (8 floats) for a slip recipe, `object_probs` for an object recipe: the probabilities of
+    `classes[task]`. `frames`: the window's length; `size`: the (H, W) the checkpoint was
+    trained at (None: any size, fixed by the first frame); `arrays`: what the checkpoint was
+    fitted on (a live stream gives rgb alone); `note`: what the recipe does without the
+    others."""
+
+    predict: Callable[[Any], dict[str, Any]]
+    frames: int
+    size: tuple[int, int] | None
+    classes: dict[str, tuple[str, ...]]
+    arrays: tuple[str, ...] = ("rgb",)
+    note: str = ""
+
+    def __call__(self, window: Any) -> dict[str, Any]:
+        return self.predict(window)
 
 
 #: The members every recipe has.

@@ -60,7 +60,9 @@ def frame_shifts(gray: list[np.ndarray], window: np.ndarray | None
     if window is None:
         return shifts, peaks
     for t in range(1, len(gray)):
-        (sx, sy), peaks[t - 1] = cv2.phaseCorrelate(gray[0], gray[t], window)
+        # OpenCV's phaseCorrelate applies the window to its inputs in place (OpenCV 5.0, at
+        # sizes its DFT takes as they are): copies, or frame 0 would be windowed t times
+        (sx, sy), peaks[t - 1] = cv2.phaseCorrelate(gray[0].copy(), gray[t].copy(), window)
         shifts[t] = sx, sy
     return shifts, peaks
 

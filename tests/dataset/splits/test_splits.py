@@ -269,3 +269,28 @@ def test_write_refuses_invalid_or_repeated_splits(tmp_path, report) -> None:
         sp.write_splits(tmp_path, [bad])
     with pytest.raises(ValueError, match="two splits"):
         sp.write_splits(tmp_path, [report.splits[0], report.splits[0]])
+
+
+def test_unseen_objects_val_keeps_the_windows_of_a_take_together() -> None:
+    """Windows cut from one take (source `path[a:b]`) never straddle train and val."""
+    base = synth(n_slip=450, n_static=0)
+    # three consecutive samples share a take, as windows of one video do
+    windows = [dataclasses.replace(s, source=f"rec/take{i // 3}.avi[{8 * (i % 3)}:"
+                                             f"{8 * (i % 3) + 8}]")
+               for i, s in enumerate(base)]
+    split = sp.unseen_objects_split(windows, seed=3)
+    take = {s.sample_id: sp.schemes.take_of(s.source) for s in windows}
+    train = {take[i] for i in split.parts["train"]}
+    val = {take[i] for i in split.parts["val"]}
+    assert val and not train & val
+    assert 0.5 * 0.1 * 450 < len(split.parts["val"]) < 2 * 0.1 * 450
+
+
+def test_unseen_objects_val_of_one_sample_takes_is_unchanged(samples) -> None:
+    """Every take one sample: the val cut is the per-sample draw it always was."""
+    a = sp.unseen_objects_split(samples, seed=5)
+    one = [dataclasses.replace(s, source=f"rec/{s.sample_id}.avi[0:8]") for s in samples]
+    b = sp.unseen_objects_split(one, seed=5)
+    assert a.parts == b.parts
+    assert sp.schemes.take_of("a/b[c].avi[3:11]") == "a/b[c].avi"
+    assert sp.schemes.take_of("rec/s1.png") == "rec/s1.png"

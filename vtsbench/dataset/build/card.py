@@ -4,6 +4,9 @@ The card's YAML `configs` make `datasets.load_dataset(OUT)` read the slip index 
 config), the static index, and two small previews whose images are PNG bytes in the `Image()`
 feature, so the Hub viewer shows frames, depth and contact. Everything is derived from the
 plan and info, with fixed encoder settings: the same build gives the same bytes.
+`storage_line` and `codec_text` say how a dataset's frames are stored (Zarr; the episodes' RGB
+as video, with the codec and its settings; format 1.3's samples as views of the episodes), for
+the cards (this one and build/episode_finish.py's) and `vtsbench info`.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...atomic import write_bytes_atomic
+from ..format.episode_video import stored_codec
 from ..format.layout import (
     ARRAYS,
     BUILD_REPORT_PATH,
@@ -25,6 +29,7 @@ from ..format.layout import (
     KINDS,
     PREVIEW_DIR,
     SPLITS_DIR,
+    VIDEOS_DIR,
     group_path,
     index_path,
     preview_path,
@@ -33,6 +38,7 @@ from .png import depth_preview_pngs, encode_png
 
 if TYPE_CHECKING:
     from ..format.info import DatasetInfo
+    from ..format.video import VideoCodec
     from .plan import Plan
 
 @dataclass(frozen=True)
@@ -162,6 +168,36 @@ def size_category(n: int) -> str:
         if n < limit:
             return name
     return "n>10M"
+
+
+def codec_text(codec: VideoCodec) -> str:
+    """A video codec in words: its name, encoder and settings, and what decoding gives back."""
+    opts = ", ".join(f"{k} {v}" for k, v in codec.options.items())
+    every = f"a keyframe every {codec.gop} frames" if codec.gop > 1 else "every frame a keyframe"
+    return (f"{codec.name} (FFmpeg {codec.codec}, {codec.pix_fmt}, {opts}; {every}; "
+            f"{codec.container} {codec.suffix}), "
+            + ("lossless: decoding gives the frames back bit for bit" if codec.lossless
+               else "lossy: the decoded frames are near, not equal to, the frames written"))
+
+
+def storage_line(info: DatasetInfo) -> str:
+    """How the frames are stored, in one line: Zarr (compression), or the episodes' RGB as
+    video (codec and settings) with depth and contact in Zarr; for format 1.3 that the static
+    and slip samples are views of the episode store."""
+    comp = (f"zstd level {info.zarr.level}" if info.zarr.level else "uncompressed") + \
+        ", a crc32c per chunk"
+    codec = stored_codec(info)
+    if codec is None:
+        line = f"Zarr v3 ({comp})"
+    else:
+        rest = [a for a in info.arrays if a != "rgb"]
+        line = (f"RGB as video, one file per episode in {VIDEOS_DIR}/: {codec_text(codec)}; "
+                + (f"{' and '.join(rest)} in Zarr v3 ({comp})" if rest
+                   else "no depth or contact"))
+    if info.views:
+        line += ("; the static and slip samples are views of the episode store (each frame "
+                 "stored once, no arrays of their own)")
+    return line
 
 
 def _configs(plan: Plan, hub: HubCard | None = None) -> str:

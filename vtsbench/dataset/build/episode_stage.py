@@ -4,7 +4,9 @@ what a rerun after a crash keeps (resume).
 The partial folder is the build's (`.OUT.partial`, locked, build/staging.py); its state folder
 `.build/` holds the writer's parameters (`writer.json`) and one record per saved episode
 (`episodes/<k>.json`: the index row, the frames' timestamps, labels and extra values), written
-after the episode's frames: a record is the commit point of its episode. Frames go into
+after the episode's frames: a record is the commit point of its episode. Samples declared on
+saved episodes (add_sample) are committed in batches, `samples/<b>.json`, each written at the
+next save_episode (before that episode's record) and at finish. Frames go into
 `data/episodes.zarr` through the build's shard writer (build/store.py): a shard is written as
 soon as it is full, and the partial shard at the end again at each save, with the Zarr metadata
 of the frames saved so far. A writer killed mid-episode leaves frames beyond the last record;
@@ -31,6 +33,8 @@ from .store import samples_per_shard, write_metadata, write_shard
 
 #: Folder of the per-episode records, in the state folder.
 RECORDS = "episodes"
+#: Folder of the sample records (batches of EpisodeWriter.add_sample), in the state folder.
+SAMPLES = "samples"
 #: Bumped whenever what the state files mean changes.
 STATE_VERSION = 1
 
@@ -69,7 +73,7 @@ class FrameShards:
         for n in self.arrays:
             self.buf[n].append(frame[n])
         self.added += 1
-        if len(self.buf["rgb"]) == self.per_shard:
+        if len(self.buf[self.arrays[0]]) == self.per_shard:
             self._write(self.buf_start // self.per_shard, self.buf)
             self.buf = {n: [] for n in self.arrays}
             self.buf_start += self.per_shard
@@ -84,7 +88,7 @@ class FrameShards:
 
     def save(self) -> None:
         """Write the partial last shard and the metadata of every frame added so far."""
-        if self.buf["rgb"]:
+        if self.buf[self.arrays[0]]:
             self._write(self.buf_start // self.per_shard, self.buf)
         self._metadata(self.committed + self.added)
 
@@ -98,7 +102,7 @@ class FrameShards:
         """Forget the frames added since the last commit (what they wrote is stale: finalize
         and the next save write over it)."""
         self.buf = {n: list(v) for n, v in self.tail.items()}
-        self.buf_start = self.committed - len(self.tail["rgb"])
+        self.buf_start = self.committed - len(self.tail[self.arrays[0]])
         self.added = 0
 
     def restore(self, committed: int, size: tuple[int, int] | None) -> None:
@@ -130,7 +134,7 @@ class FrameShards:
         if self.layout is None:
             return
         last = -(-self.committed // self.per_shard)
-        if self.tail["rgb"]:
+        if self.tail[self.arrays[0]]:
             self._write(last - 1, self.tail)
         for n in self.arrays:
             chunks = self.group_dir / n / "c"
@@ -202,3 +206,34 @@ def read_records(stage: Path) -> list[dict[str, Any]]:
         if p.name.startswith(".") and p.is_file():
             p.unlink()
     return out
+
+
+def write_samples(stage: Path, b: int, samples: list[dict[str, Any]]) -> None:
+    """Batch b of sample records (EpisodeWriter.add_sample): the commit point of the samples
+    added since the previous batch; written at each save_episode and at finish."""
+    (_state_dir(stage) / SAMPLES).mkdir(parents=True, exist_ok=True)
+    write_bytes_atomic(_state_dir(stage) / SAMPLES / f"{b:06d}.json",
+                       json.dumps(samples, allow_nan=False).encode())
+
+
+def read_samples(stage: Path, episodes: int) -> tuple[list[dict[str, Any]], int]:
+    """The committed sample records (batches 0..b-1, each following the previous, every sample
+    of a saved episode) and how many batches; batches past the first gap or bad one deleted."""
+    folder = _state_dir(stage) / SAMPLES
+    out: list[dict[str, Any]] = []
+    b = 0
+    while True:
+        try:
+            docs = json.loads((folder / f"{b:06d}.json").read_text())
+            ok = isinstance(docs, list) and all(0 <= int(d["episode_index"]) < episodes
+                                                for d in docs)
+        except (OSError, ValueError, KeyError, TypeError):
+            break
+        if not ok:
+            break
+        out += docs
+        b += 1
+    for p in folder.glob("*.json") if folder.is_dir() else ():
+        if not p.stem.isdigit() or int(p.stem) >= b:
+            p.unlink()
+    return out, b

@@ -8,6 +8,12 @@ from pathlib import Path
 from ...errors import VtsError
 
 SOLVERS = ("dct", "dst", "masked")
+#: --store: samples (their own Zarr arrays, as always) or episodes (each take stored once,
+#: the samples views of it: format 1.3, build/episodes_build.py).
+STORES = ("samples", "episodes")
+#: --video (with --store episodes): the codecs of format/video.py a build may store each
+#: take's RGB with (lossless ffv1; lossy h264 and av1 at their stated quality).
+VIDEOS = ("ffv1", "h264", "av1")
 
 
 @dataclass(frozen=True)
@@ -31,6 +37,11 @@ class BuildOptions:
     holdout_objects: Path | None = None
     #: --split-file: split schemes in schemas/split.schema.json given by the user.
     split_files: tuple[Path, ...] = ()
+    #: --store: "samples" (default) or "episodes" (STORES).
+    store: str = "samples"
+    #: --video: None (RGB in Zarr) or a codec of VIDEOS, each take's RGB as one video file
+    #: (--store episodes only; vtsbench.create's `video`).
+    video: str | None = None
 
 
 def check_options(opts: BuildOptions) -> None:
@@ -49,6 +60,13 @@ def check_options(opts: BuildOptions) -> None:
 
     check_range("--frames", opts.frames, 1, MAX_FRAMES)
     check_range("--workers", opts.workers, 1, MAX_WORKERS)
+    if opts.store not in STORES:
+        raise VtsError(f"--store must be one of {', '.join(STORES)}, got {opts.store!r:.40}")
+    if opts.video is not None and opts.video not in VIDEOS:
+        raise VtsError(f"--video must be one of {', '.join(VIDEOS)}, got {opts.video!r:.40}")
+    if opts.video is not None and opts.store != "episodes":
+        raise VtsError(f"--video {opts.video} stores each take's RGB as video: it needs --store "
+                       "episodes (--store samples keeps every sample's frames in Zarr)")
     if opts.solver not in SOLVERS:
         raise VtsError(f"--solver must be one of {', '.join(SOLVERS)}, got {opts.solver!r}")
     if not opts.depth and opts.calibration is not None:

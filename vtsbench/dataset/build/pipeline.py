@@ -67,6 +67,8 @@ class BuildResult:
     bytes_on_disk: dict[str, int]
     seconds: float
     warnings: list[str] = field(default_factory=list)
+    #: --store episodes: the takes stored (shards_built/kept then count takes written/kept)
+    takes: int | None = None
 
 
 def build(recordings: str | Path, out: str | Path, opts: BuildOptions | None = None,
@@ -79,6 +81,10 @@ def build(recordings: str | Path, out: str | Path, opts: BuildOptions | None = N
     t0 = time.perf_counter()
     check_options(opts)
     root, out = Path(recordings).resolve(), Path(out).resolve()
+    if opts.store == "episodes":  # each take stored once, the samples views of it
+        from .episodes_build import build_episodes
+
+        return BuildResult(**build_episodes(root, out, opts, say))
     recover(out)  # what a build killed in its final rename left: OUT's previous copy put back
     check_out(root, out, opts.overwrite)
     with ExitStack() as stack:

@@ -41,7 +41,10 @@ def encode_frames(frames: np.ndarray, path: str | os.PathLike, codec: str | Vide
     _quiet_svt()
     import av
 
-    options = {"movflags": "+faststart"} if codec.container == "mp4" else {}
+    # bitexact: no random ids or library version in the file, so the same frames give the
+    # same bytes (a resumed dataset equals one written in one go)
+    options = {"fflags": "+bitexact",
+               **({"movflags": "+faststart"} if codec.container == "mp4" else {})}
     try:
         # an absolute name is a file to FFmpeg, never a URL or another protocol
         with replacing(path.absolute()) as tmp, \

@@ -13,10 +13,18 @@ and nothing has an info.json before then. Each saved episode is committed by its
 and goes on, and a writer killed mid-episode loses that episode alone. Every refusal of bad
 input is one line naming the episode and frame (build/episode_check.py); dropped frames
 (timestamp gaps over 1.5 frame periods) are counted in the episode's row and warned about.
+
+`add_sample` declares the paper's static frames and slip sequences as views of saved episodes
+(build/episode_samples.py): the dataset is then format 1.3, with their indexes and split
+files and no arrays of their own. Samples are committed with the next save_episode or at
+finish(); a writer killed before that loses the samples added since the last save, and only
+those. `vtsbench build --store episodes` is written on this writer (build/episodes_build.py).
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import re
 import shutil
 import warnings
@@ -31,6 +39,7 @@ import numpy as np
 from ...errors import VtsError
 from ..format.episodes import EpisodeRecord, dropped_frames, duration_s
 from ..format.layout import EPISODES_GROUP, INFO_PATH
+from ..splits.given import check_object_list
 from .episode_check import (
     FrameSpec,
     check_arrays_choice,
@@ -45,15 +54,10 @@ from .episode_check import (
     frame_arrays,
 )
 from .episode_finish import finish_episodes, merged_kinds
-from .episode_stage import (
-    FrameShards,
-    holds_files,
-    read_records,
-    read_state,
-    write_record,
-    write_state,
-)
-from .staging import locked_stage, partial_path
+from .episode_samples import SampleLog, check_frames_per_sequence
+from .episode_stage import SAMPLES, holds_files, read_records, read_state, write_record, write_state
+from .episode_video import check_video, frame_store
+from .staging import WORK, locked_stage, partial_path
 
 #: dataset_version: a semantic version (as info.json's schema says).
 SEMVER = re.compile(r"(0|[1-9]\d*)\.(0|[1-9]\d*)\.(0|[1-9]\d*)(-[0-9A-Za-z.-]+)?"
@@ -68,18 +72,28 @@ def create(path: str | Path, *, fps: float = 25.0, arrays: Sequence[str] = ("rgb
            sensor: str = "unknown", name: str | None = None,
            calibration_sha256: str | None = None, resume: bool = False,
            overwrite: bool = False, dataset_version: str = "1.0.0",
-           compression_level: int = 3, shard_mb: float = 32.0, seed: int = 0) -> EpisodeWriter:
+           compression_level: int = 3, shard_mb: float = 32.0, seed: int = 0,
+           frames_per_sequence: int = 8, video: str | None = None,
+           holdout_objects: Sequence[str] | None = None) -> EpisodeWriter:
     """A writer of episodes into a new dataset at `path` (see EpisodeWriter).
 
     fps, sensor and calibration_sha256 are each episode's defaults (save_episode may give its
     own); arrays: ("rgb",) or ("rgb", "depth", "contact"); resume=True continues the partial
     dataset a killed writer left (every saved episode kept); overwrite=True replaces an
     existing dataset at `path` when finished; seed: the split schemes' at finish()
-    (unseen_objects, unseen_sessions over the episodes)."""
+    (unseen_objects, unseen_sessions over the episodes, and the fixed schemes over the
+    samples); frames_per_sequence: T, the frames of a slip sample (add_sample); video: None
+    (RGB in Zarr) or a codec of format/video.py ("ffv1" lossless, "h264", "av1"): each saved
+    episode's RGB as one video file (build/episode_video.py), depth and contact in Zarr;
+    holdout_objects: a lab's test objects, the split given_objects at finish() (test: their
+    episodes, val: whole other objects drawn with `seed`; `episode_given_objects` and the
+    samples' `given_objects`, the same objects held out, when there are samples)."""
     return EpisodeWriter(path, fps=fps, arrays=arrays, sensor=sensor, name=name,
                          calibration_sha256=calibration_sha256, resume=resume,
                          overwrite=overwrite, dataset_version=dataset_version,
-                         compression_level=compression_level, shard_mb=shard_mb, seed=seed)
+                         compression_level=compression_level, shard_mb=shard_mb, seed=seed,
+                         frames_per_sequence=frames_per_sequence, video=video,
+                         holdout_objects=holdout_objects)
 
 
 class EpisodeWriter:
@@ -90,13 +104,21 @@ class EpisodeWriter:
     def __init__(self, path: str | Path, *, fps: float, arrays: Sequence[str], sensor: str,
                  name: str | None, calibration_sha256: str | None, resume: bool,
                  overwrite: bool, dataset_version: str, compression_level: int,
-                 shard_mb: float, seed: int = 0) -> None:
+                 shard_mb: float, seed: int = 0, frames_per_sequence: int = 8,
+                 provenance: Mapping[str, Any] | None = None, video: str | None = None,
+                 holdout_objects: Sequence[str] | None = None) -> None:
         self.out = Path(path).resolve()
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
             raise VtsError(f"create: seed must be a non-negative integer, got {seed!r:.80}")
         self.seed = seed
+        self.holdout_objects = None if holdout_objects is None else tuple(
+            check_object_list(holdout_objects, "create(holdout_objects=...)"))
+        self.frames_per_sequence = check_frames_per_sequence(frames_per_sequence)
+        #: what a build records of itself in info.json (created_by, calibration, build)
+        self.provenance = dict(provenance or {})
         self.fps = check_fps(fps)
         self.arrays = check_arrays_choice(arrays)
+        self.video = check_video(video)
         self.sensor = check_name(sensor, "sensor", "create")
         self.name = check_name(name or self.out.name, "name", "create")
         self.calibration_sha256 = check_sha256(calibration_sha256, "create")
@@ -137,7 +159,11 @@ class EpisodeWriter:
 
     def _params(self) -> dict[str, Any]:
         return {"arrays": list(self.arrays), "compression_level": self.level,
-                "shard_mb": self.shard_mb}
+                "shard_mb": self.shard_mb, "frames_per_sequence": self.frames_per_sequence,
+                "video": None if self.video is None else self.video.name,
+                **({"build": hashlib.sha256(json.dumps(  # a build: its options, recordings
+                    self.provenance["build"], sort_keys=True).encode()).hexdigest()[:16]}
+                   if self.provenance.get("build") else {})}
 
     def _open(self, resume: bool) -> None:
         """Start afresh, or resume the partial folder's saved episodes."""
@@ -148,6 +174,7 @@ class EpisodeWriter:
         self._records: list[dict[str, Any]] = read_records(self.stage) if state else []
         if state is not None and not resume and not self._records:  # nothing saved to lose
             shutil.rmtree(self.stage / EPISODES_GROUP, ignore_errors=True)
+            shutil.rmtree(self.stage / WORK / SAMPLES, ignore_errors=True)
             state = None
         if state is not None and not resume:
             raise VtsError(f"a partial dataset is here ({len(self._records)} episode(s) saved "
@@ -156,6 +183,10 @@ class EpisodeWriter:
         if state is not None:
             given = self._params()
             diff = [k for k in given if state.get(k) != given[k]]
+            if "build" in diff:
+                raise VtsError("resume: the build's options or recordings differ from those of "
+                               "the partial build: rerun it as it was, or delete the partial "
+                               "folder to start again", self.stage)
             if diff:
                 raise VtsError(f"resume: {diff[0]} {given[diff[0]]!r} differs from the partial "
                                f"dataset's {state.get(diff[0])!r}", self.stage)
@@ -163,13 +194,15 @@ class EpisodeWriter:
             write_state(self.stage, self._params())
         self._spec = FrameSpec.from_dict(self._records[0]["spec"]) if self._records \
             else FrameSpec()
-        self._frames = FrameShards(self.stage, self.arrays, self.level,
-                                   int(self.shard_mb * 2**20))
+        self._frames = frame_store(self.stage, self.arrays, self.level,
+                                   int(self.shard_mb * 2**20), self.video, len(self._records))
         self._frames.restore(sum(int(r["record"]["length"]) for r in self._records),
                              self._spec.size)
         self._saved_kinds = merged_kinds(self._records)
         self._meta_names = {k for r in self._records for k in EpisodeRecord.from_dict(
             r["record"]).meta}
+        self._log = SampleLog(self.stage, self.frames_per_sequence,
+                              len(self._records) if state is not None else None)
         self._reset()
 
     def _reset(self) -> None:
@@ -199,6 +232,21 @@ class EpisodeWriter:
     def pending(self) -> int:
         """Frames added since the last save_episode."""
         return len(self._states)
+
+    @property
+    def saved_episodes(self) -> list[dict[str, Any]]:
+        """The index rows of the saved episodes (EpisodeRecord fields), in order."""
+        return [dict(r["record"]) for r in self._records]
+
+    @property
+    def samples(self) -> int:
+        """Samples declared so far (add_sample; resumed ones included)."""
+        return len(self._log)
+
+    @property
+    def sample_ids(self) -> frozenset[str]:
+        """The ids of the samples declared so far (a resumed writer: the committed ones)."""
+        return frozenset(self._log.ids)
 
     @property
     def partial(self) -> Path:
@@ -283,7 +331,10 @@ class EpisodeWriter:
                "direction": self._dirs, "extra": self._extra,
                "extra_kinds": {c: self._kinds[c] for c in self._extra if c in self._kinds},
                "spec": self._spec.to_dict()}
+        if self.video is not None:  # the episode's RGB as one video file, before its record
+            self._frames.save_video(k, rate)
         self._frames.save()  # the frames first, then the record that commits them
+        self._log.commit()  # (they view earlier episodes: committed whatever follows)
         write_record(self.stage, k, doc)
         self._frames.saved()
         self._records.append(doc)
@@ -336,6 +387,29 @@ class EpisodeWriter:
                 self.discard_episode()
             raise
 
+    # -- samples: views of the saved episodes ---------------------------------------------
+
+    def add_sample(self, kind: str, *, episode: int | str, start: int,
+                   sample_id: str | None = None, **labels: Any) -> str:
+        """Declare a sample of the paper's tasks as a view of a saved episode: kind "static"
+        (the frame `start`) or "slip" (frames_per_sequence frames from `start`) of `episode`
+        (its episode_id or index); labels: state, direction, motion_mm (dx, dy), press_depth_mm,
+        contact_px (x, y), mm_per_px (x, y), source (text; default `<episode_id>[a:b]`) and
+        fields (the sample's own text columns); object, session and sensor are the episode's.
+        Returns the sample id (default `<episode_id>-s<start>` / `-f<start>`). Committed with
+        the next save_episode or at finish(): a writer killed before that loses the samples
+        added since the last save_episode (resume keeps all the earlier ones, `sample_ids`)."""
+        self._check_open()
+        return self._log.add(kind, episode, start, sample_id, labels, self._records)
+
+    def add_split(self, split: Any) -> None:
+        """A split given by the caller (a SplitFile of kind static or slip: parts of sample
+        ids; or "episode": parts of episode ids), written at finish() beside the fixed schemes
+        and leak-checked as they are (ids known, none in two parts, keys, frame rows); not kept
+        across a resume: give it again before finish()."""
+        self._check_open()
+        self._log.add_split(split)
+
     # -- finishing ------------------------------------------------------------------------
 
     def finish(self) -> Path:
@@ -348,10 +422,16 @@ class EpisodeWriter:
         if not self._records:
             raise VtsError("no episodes saved: nothing to finish (add_episode, or add_frame "
                            "then save_episode, first)", self.out)
+        if any(sp.kind != "episode" for sp in self._log.splits) and not self.samples:
+            raise VtsError("splits of samples given (add_split) but no samples (add_sample)",
+                          self.out)
         self._check_out()
+        self._log.commit()
         finish_episodes(self.stage, self.out, self._frames, self._records, name=self.name,
                         dataset_version=self.dataset_version, shard_mb=self.shard_mb,
-                        seed=self.seed)
+                        seed=self.seed, samples=self._log.committed,
+                        frames_per_sequence=self.frames_per_sequence, given=self._log.splits,
+                        provenance=self.provenance, holdout_objects=self.holdout_objects)
         self.close()
         return self.out
 

@@ -37,13 +37,19 @@ PARQUET_OPTIONS: dict[str, Any] = {"compression": "zstd", "compression_level": 3
 #: An extra index column's name: a lowercase identifier (the field's name, cleaned).
 EXTRA_NAME_RE = re.compile(r"^[a-z_][a-z0-9_]{0,63}$")
 DIRECTIONS = 8
+#: Format 1.3, samples as views of the episode store (info.json sample_storage "episodes"):
+#: two int64 columns after the fixed ones, the sample's episode (its row in
+#: index/episodes.parquet) and the store row of its first frame (in data/episodes.zarr); a
+#: sample's frames are rows frame_row .. frame_row + T - 1 (T = 1 for a static frame).
+VIEW_COLUMNS = ("episode_index", "frame_row")
 
 
-def index_schema(kind: str, scale_known: bool = True) -> pa.Schema:
+def index_schema(kind: str, scale_known: bool = True, views: bool = False) -> pa.Schema:
     """The pyarrow schema of index/<kind>.parquet (docs/dataset.md, Index columns).
 
     scale_known=False: mm_per_px_x and mm_per_px_y may be null, in a dataset built without
-    depth from sessions whose scale is unknown (every other dataset has them).
+    depth from sessions whose scale is unknown (every other dataset has them). views=True:
+    followed by VIEW_COLUMNS (format 1.3, samples as views of the episode store).
     """
     import pyarrow as pa
 
@@ -60,14 +66,18 @@ def index_schema(kind: str, scale_known: bool = True) -> pa.Schema:
     if not scale_known:
         nullable |= {"mm_per_px_x", "mm_per_px_y"}
     cols = INDEX_COLUMNS if kind == "slip" else static_columns()
-    return pa.schema([pa.field(c, types[c], nullable=c in nullable) for c in cols])
+    fields = [pa.field(c, types[c], nullable=c in nullable) for c in cols]
+    return pa.schema(fields + ([pa.field(c, pa.int64(), nullable=False) for c in VIEW_COLUMNS]
+                               if views else []))
 
 
 def index_schema_of(table_schema: pa.Schema, kind: str) -> pa.Schema | None:
     """The index schema (either scale variant) a read table has, or None if neither.
 
     The fixed columns may be followed by extra nullable string columns: the recordings' own
-    fields (pattern fields, `take`, keys of an entry's meta), see `extra_column_name`."""
+    fields (pattern fields, `take`, keys of an entry's meta), see `extra_column_name`; and by
+    the int64 VIEW_COLUMNS, each at most once (format 1.3: whether info.json wants them is
+    `index_problems`'s check)."""
     import pyarrow as pa
 
     have = table_schema.remove_metadata()
@@ -77,8 +87,11 @@ def index_schema_of(table_schema: pa.Schema, kind: str) -> pa.Schema | None:
         if len(have) < n or not pa.schema(list(have)[:n]).equals(want):
             continue
         extra = list(have)[n:]
-        if all(f.type == pa.string() and f.nullable and EXTRA_NAME_RE.match(f.name)
-               and f.name not in INDEX_COLUMNS for f in extra):
+        views = [f.name for f in extra if f.name in VIEW_COLUMNS and f.type == pa.int64()]
+        if len(set(views)) == len(views) and all(
+                f.name in views or (f.type == pa.string() and f.nullable
+                                    and EXTRA_NAME_RE.match(f.name)
+                                    and f.name not in INDEX_COLUMNS) for f in extra):
             return have
     return None
 
@@ -89,17 +102,20 @@ def extra_column_name(key: str) -> str | None:
     name = re.sub(r"[^a-z0-9_]+", "_", str(key).strip().lower()).strip("_")[:58]
     if not name:
         return None
-    if name[0].isdigit() or name in INDEX_COLUMNS or name in ("kind", "labels", "meta"):
+    if name[0].isdigit() or name in (*INDEX_COLUMNS, *VIEW_COLUMNS, "kind", "labels", "meta"):
         name = f"meta_{name}"
     return name if EXTRA_NAME_RE.match(name) else None
 
 
 def index_bytes(kind: str, metas: Sequence[SampleMeta],
-                extra: Mapping[str, Sequence[str | None]] | None = None) -> bytes:
+                extra: Mapping[str, Sequence[str | None]] | None = None, *,
+                views: Mapping[str, Sequence[int]] | None = None) -> bytes:
     """The parquet file of one kind's index; rows must be in row order 0..N-1.
 
     extra: more string columns (name -> one value per row, None where a row has none), after
-    the fixed ones in name order: the recordings' own fields, which `where()` filters on."""
+    the fixed ones in name order: the recordings' own fields, which `where()` filters on.
+    views (format 1.3, samples as views of the episode store): VIEW_COLUMNS name -> one
+    integer per row, written right after the fixed columns."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -109,6 +125,13 @@ def index_bytes(kind: str, metas: Sequence[SampleMeta],
                              f"out of place in the {kind} index")
     known = all(m.mm_per_px_x is not None and m.mm_per_px_y is not None for m in metas)
     table = pa.Table.from_pylist([m.to_row() for m in metas], schema=index_schema(kind, known))
+    if views is not None:
+        if set(views) != set(VIEW_COLUMNS) or any(len(views[c]) != len(metas)
+                                                   for c in VIEW_COLUMNS):
+            raise ValueError(f"views: {', '.join(VIEW_COLUMNS)}, one integer per row each")
+        for c in VIEW_COLUMNS:
+            table = table.append_column(pa.field(c, pa.int64(), nullable=False),
+                                        pa.array(np.asarray(views[c], np.int64)))
     for name in sorted(extra or {}):
         values = list((extra or {})[name])
         if len(values) != len(metas) or extra_column_name(name) != name:
@@ -242,6 +265,73 @@ def index_problems(table: pa.Table, kind: str, info: DatasetInfo) -> list[str]:
                 "class_idx contradicts the object's place in info.json objects",
                 lambda i: f"class_idx {int(cls[i])}, {objects[i]!r} is {int(where[i])}")
     out += _value_problems(table, kind, info, ids)
+    return out + _view_column_problems(table, info, ids)
+
+
+def view_columns(table: pa.Table) -> list[str]:
+    """The VIEW_COLUMNS an index table has (int64), in that order."""
+    import pyarrow as pa
+
+    names = {f.name for f in table.schema if f.type == pa.int64()}
+    return [c for c in VIEW_COLUMNS if c in names]
+
+
+def _view_column_problems(table: pa.Table, info: DatasetInfo, ids: Sequence[str]) -> list[str]:
+    """VIEW_COLUMNS present exactly when info.json says the samples are views of the episode
+    store (sample_storage "episodes"), with no nulls and no negative values."""
+    have = view_columns(table)
+    if info.views and len(have) < len(VIEW_COLUMNS):
+        missing = [c for c in VIEW_COLUMNS if c not in have]
+        return [f"no {' or '.join(missing)} column, and info.json says sample_storage "
+                f"{info.sample_storage!r} (each sample is a view of the episode store)"]
+    if not info.views and have:
+        return [f"a {have[0]} column, and info.json says no sample_storage (the samples are "
+                "stored, not views of the episode store)"]
+    out = []
+    for c in have:
+        out += rows(_nulls(table, c), ids, f"{c} is null")
+        vals = column_values(table, c)
+        out += rows(vals < 0, ids, f"{c} is negative", lambda i, v=vals: f"{v[i]:.0f}")
+    return out
+
+
+def frame_rows(table: pa.Table, kind: str, frames_per_sequence: int,
+               frames: np.ndarray | None = None) -> np.ndarray:
+    """The episode-store rows of each sample of a views index (format 1.3), (n, T) int64 in
+    index order: frame_row + 0..T-1 for slip (T = frames_per_sequence), frame_row for static
+    (T = 1); `frames` keeps those frame numbers of each slip sequence."""
+    start = np.asarray(table.column("frame_row").to_numpy(zero_copy_only=False), np.int64)
+    offsets = np.arange(frames_per_sequence if kind == "slip" else 1, dtype=np.int64)
+    if frames is not None:
+        offsets = offsets[np.asarray(frames, np.int64)]
+    return start[:, None] + offsets[None, :]
+
+
+def view_problems(table: pa.Table, kind: str, frames_per_sequence: int, starts: np.ndarray,
+                  lengths: np.ndarray) -> list[str]:
+    """Where a views index (format 1.3) contradicts the episodes it views: an episode_index
+    of no episode, and a sample whose frames (frame_row .. frame_row + T - 1) are not all
+    inside its episode's [frame_start, frame_start + length); one line per kind of problem.
+    starts, lengths: index/episodes.parquet's frame_start and length, by episode row."""
+    if len(view_columns(table)) < len(VIEW_COLUMNS):
+        return []
+    ids = [i if i is not None else "?" for i in table.column("sample_id").to_pylist()]
+    starts, lengths = np.asarray(starts, np.int64), np.asarray(lengths, np.int64)
+    ep = np.asarray(column_values(table, "episode_index"))
+    row = np.asarray(column_values(table, "frame_row"))
+    bad = ~np.isfinite(ep) | (ep < 0) | (ep >= len(starts))
+    out = rows(bad, ids, f"episode_index is no episode of index/episodes.parquet "
+               f"({len(starts)} episodes)", lambda i: f"{ep[i]:.0f}")
+    t = frames_per_sequence if kind == "slip" else 1
+    e = np.where(bad, 0, ep).astype(np.int64)
+    lo = starts[e] if len(starts) else np.zeros(len(e), np.int64)
+    hi = lo + (lengths[e] if len(lengths) else 0)
+    outside = ~bad & np.isfinite(row) & ((row < lo) | (row + t > hi))
+    what = "frame rows" if t > 1 else "frame row"
+    out += rows(outside, ids, f"{what} outside the sample's episode",
+                lambda i: f"rows {row[i]:.0f}..{row[i] + t - 1:.0f}, episode {e[i]} holds "
+                          f"{lo[i]}..{hi[i] - 1}" if t > 1 else
+                          f"row {row[i]:.0f}, episode {e[i]} holds {lo[i]}..{hi[i] - 1}")
     return out
 
 

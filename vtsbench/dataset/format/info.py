@@ -12,9 +12,11 @@ from pathlib import Path
 from typing import Any
 
 from ...errors import VtsError
-from .layout import ARRAYS, CHECKSUMMED, DEPTH_DTYPE, DEPTH_SCALE_MM, INFO_PATH, RGB_ONLY
+from .episode_video import codec_from_dict
+from .layout import ARRAYS, CHECKSUMMED, DEPTH_DTYPE, DEPTH_SCALE_MM, INFO_PATH, KINDS, RGB_ONLY
 from .problems import first
 from .records import SPLIT_NAME, SampleMeta, SplitFile, schema_errors
+from .video import VideoCodec
 
 FORMAT = "vtsbench.dataset"
 #: 1.1: info.json carries info_sha256, the sha256 of its own text (see `DatasetInfo.to_json`),
@@ -23,6 +25,13 @@ FORMAT_VERSION = "1.1"
 #: 1.2: episodes (continuous takes stored once, format/episodes.py), counted under `episodes`.
 #: Written only by a dataset that holds episodes, so builds without them keep their bytes.
 EPISODES_FORMAT_VERSION = "1.2"
+#: 1.3: the static frames and slip sequences stored as views of the episode store
+#: (`"sample_storage": "episodes"`): each sample's index row names its episode and the store
+#: row of its first frame (format/index.py VIEW_COLUMNS); no data/static.zarr or slip.zarr.
+VIEWS_FORMAT_VERSION = "1.3"
+#: info.json `sample_storage` of a dataset whose samples are views of its episode store.
+SAMPLE_STORAGE_EPISODES = "episodes"
+SAMPLE_STORAGES = (SAMPLE_STORAGE_EPISODES,)
 DEFAULT_UNITS: dict[str, str] = {
     "depth": "mm",
     "length": "mm",
@@ -96,7 +105,9 @@ class Counts:
 @dataclass(frozen=True)
 class EpisodeCounts:
     """Episodes (format 1.2): how many, their frames, episodes per object and session, frames
-    per state ('unknown' for null) and frames missing from the takes (timestamp gaps)."""
+    per state ('unknown' for null) and frames missing from the takes (timestamp gaps); and,
+    when the episodes' RGB is stored as video (format/episode_video.py), the codec's
+    settings (not a count: None, and no key, when the RGB is in Zarr)."""
 
     episodes: int = 0
     frames: int = 0
@@ -104,14 +115,33 @@ class EpisodeCounts:
     sessions: dict[str, int] = field(default_factory=dict)
     states: dict[str, int] = field(default_factory=dict)
     dropped_frames: int = 0
+    video: VideoCodec | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+        doc = {k: getattr(self, k) for k in COUNT_FIELDS}
+        if self.video is not None:  # written only when set: other datasets keep their bytes
+            doc[VIDEO_FIELD] = self.video.to_dict()
+        return doc
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> EpisodeCounts:
+        """The block as info.json holds it (checked by its schema: `$defs/video_codec` admits
+        only codecs vtsbench reads)."""
+        video = d.get(VIDEO_FIELD)
         return cls(int(d["episodes"]), int(d["frames"]), dict(d["objects"]),
-                   dict(d["sessions"]), dict(d["states"]), int(d["dropped_frames"]))
+                   dict(d["sessions"]), dict(d["states"]), int(d["dropped_frames"]),
+                   None if video is None else codec_from_dict(video))
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled as its info.json block (a DataLoader worker gets the dataset's info; the
+        codec's read-only options mapping does not pickle)."""
+        return (EpisodeCounts.from_dict, (self.to_dict(),))
+
+
+#: The counts of EpisodeCounts (what the episode indexes must agree with), in info.json order.
+COUNT_FIELDS = ("episodes", "frames", "objects", "sessions", "states", "dropped_frames")
+#: The key of info.json's `episodes` block recording the codec of an RGB stored as video.
+VIDEO_FIELD = "video"
 
 
 @dataclass(frozen=True)
@@ -168,6 +198,9 @@ class DatasetInfo:
     format_version: str = FORMAT_VERSION
     #: format 1.2, a dataset holding episodes: their counts (None, and no key, otherwise)
     episodes: EpisodeCounts | None = None
+    #: format 1.3: "episodes" when the static and slip samples are views of the episode store
+    #: (None, and no key, otherwise)
+    sample_storage: str | None = None
     #: as read from the file (to_json computes it afresh)
     info_sha256: str = field(default="", compare=False)
 
@@ -181,6 +214,11 @@ class DatasetInfo:
         --no-depth), in that order."""
         names = {a for shapes in self.shapes.values() for a in shapes}
         return tuple(a for a in ARRAYS if a in names)
+
+    @property
+    def views(self) -> bool:
+        """Whether the static and slip samples are views of the episode store (format 1.3)."""
+        return self.sample_storage == SAMPLE_STORAGE_EPISODES
 
     @property
     def has_depth(self) -> bool:
@@ -204,6 +242,8 @@ class DatasetInfo:
         }
         if self.episodes is not None:  # format 1.2 only: other datasets keep their bytes
             doc["episodes"] = self.episodes.to_dict()
+        if self.sample_storage is not None:  # format 1.3 only, as episodes
+            doc["sample_storage"] = self.sample_storage
         return doc
 
     def to_json(self) -> str:
@@ -236,7 +276,7 @@ class DatasetInfo:
             depth_scale_mm=float(d["depth_scale_mm"]), depth_dtype=d["depth_dtype"],
             format_version=d["format_version"], info_sha256=d.get("info_sha256", ""),
             episodes=None if d.get("episodes") is None else EpisodeCounts.from_dict(
-                d["episodes"]))
+                d["episodes"]), sample_storage=d.get("sample_storage"))
 
 
 def format_minor(version: str) -> int:
@@ -293,6 +333,28 @@ def consistency_problems(info: DatasetInfo) -> list[str]:
                    f"shapes.episodes ({'absent' if frames is None else f'{frames} frames'})")
     if ep is not None and format_minor(info.format_version) < 2:
         out.append(f"episodes need format 1.2 or later, info.json says {info.format_version}")
+    return out + _storage_problems(info)
+
+
+def _storage_problems(info: DatasetInfo) -> list[str]:
+    """Where sample_storage contradicts the rest: samples as views need format 1.3, the
+    episodes they view, and no stored static or slip arrays (no samples_per_shard for them)."""
+    storage = info.sample_storage
+    if storage is None:
+        return []
+    if storage not in SAMPLE_STORAGES:
+        return [f"sample_storage {storage!r:.60} is not one of {', '.join(SAMPLE_STORAGES)}"]
+    out = []
+    if format_minor(info.format_version) < format_minor(VIEWS_FORMAT_VERSION):
+        out.append(f"sample_storage {storage!r} needs format {VIEWS_FORMAT_VERSION} or later, "
+                   f"info.json says {info.format_version}")
+    if info.episodes is None:
+        out.append(f"sample_storage {storage!r} without episodes (the samples are views of "
+                   "them)")
+    stored = sorted(k for k in KINDS if k in info.zarr.samples_per_shard)
+    if stored:
+        out.append(f"zarr.samples_per_shard.{stored[0]} with sample_storage {storage!r} (its "
+                   "samples are views of the episode store, nothing of their own is stored)")
     return out
 
 

@@ -72,3 +72,13 @@ EPISODES_GROUP = group_path(EPISODES)
 EPISODES_INDEX = index_path(EPISODES)
 #: `index/frames.parquet`: one row per frame (timestamp and labels), in store order.
 FRAMES_INDEX = index_path("frames")
+#: `data/videos/`: the episodes' RGB as one video file each, in a dataset written with
+#: `vtsbench.create(..., video=...)` (format/episode_video.py).
+VIDEOS_DIR = f"{DATA_DIR}/videos"
+
+
+def episode_video_path(episode_index: int, suffix: str) -> str:
+    """`data/videos/episode-<index, 6 digits><suffix>` (suffix: the codec's container, .mkv or
+    .mp4): episode k's RGB as video, named by its index (an episode id may hold any
+    character, a path separator included)."""
+    return f"{VIDEOS_DIR}/episode-{int(episode_index):06d}{suffix}"

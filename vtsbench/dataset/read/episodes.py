@@ -33,6 +33,7 @@ from ..format.layout import DECODED_DTYPES, EPISODES, EPISODES_GROUP, EPISODES_I
 from ..format.records import part_key
 from ..splits.episodes import EPISODE
 from .arrays import ITER_BYTES, check_arrays
+from .episode_video import episode_videos
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -123,10 +124,22 @@ class EpisodeData:
                       for n in frames.column_names[len(FRAME_COLUMNS):]}
         self.rows = episodes.to_pylist()
         self.split_file: Callable[[str], SplitFile] | None = None
+        #: the episodes' videos where their RGB is stored so (None: in the Zarr store)
+        self.videos = episode_videos(store, self.starts, self.lengths)
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickled without the loader's split reader (a worker reads windows, not splits)."""
         return {**self.__dict__, "split_file": None}
+
+    def read_frames(self, rows: np.ndarray, names: Sequence[str]) -> dict[str, np.ndarray]:
+        """Arrays of frame rows of the store (any order, repeats allowed; depth in mm), each
+        row read once in one batched call: the one read of frames that the samples viewing
+        this store (format 1.3) go through; rgb decoded from the episodes' videos where the
+        dataset stores it so (read/episode_video.py)."""
+        rows = np.asarray(rows, np.int64).reshape(-1)
+        if self.videos is not None and "rgb" in names:
+            return self.videos.read_with(self.store, rows, names)
+        return self.store.read(rows, names)
 
     def per_frame(self, rows: np.ndarray) -> dict[str, Any]:
         """Timestamps, labels and extra values of frame rows (any shape)."""
@@ -151,6 +164,11 @@ class Episodes:
 
     def __len__(self) -> int:
         return len(self._pos)
+
+    @property
+    def data(self) -> EpisodeData:
+        """What these episodes are read from (both indexes and the frames store)."""
+        return self._data
 
     def __repr__(self) -> str:
         frames = int(self._data.lengths[self._pos].sum())
@@ -197,7 +215,7 @@ class Episodes:
         rows = np.arange(d.starts[p], d.starts[p] + d.lengths[p])
         names = d.store.info.arrays if arrays is None else tuple(arrays)
         return {**d.rows[p], "frame_index": rows - d.starts[p], **d.per_frame(rows),
-                **d.store.read(rows, names)}
+                **d.read_frames(rows, names)}
 
     def where(self, **columns: Any) -> Episodes:
         """Episodes whose index columns take the given value(s), e.g. where(object="mug",
@@ -380,7 +398,7 @@ class Windows:
             info = d.store.info
             return {**out, **{n: np.empty((0, self.length, *info.shapes[EPISODES][n][1:]),
                                           DECODED_DTYPES[n]) for n in names}}
-        data = d.store.read(rows.reshape(-1), names)
+        data = d.read_frames(rows.reshape(-1), names)
         return {**out, **{n: a.reshape(len(pos), self.length, *a.shape[1:])
                           for n, a in data.items()}}
 

@@ -3,7 +3,11 @@
 Loading reads only meta/info.json and the two parquet indexes; split files are read (and checked
 against their sha256 in info.json) when first used, and the Zarr arrays are opened on the first
 read in each process. Views therefore pickle small (no open handle), which is what DataLoader
-workers need, and reading one split or one object touches only those samples' chunks.
+workers need, and reading one split or one object touches only those samples' chunks. Where
+the samples are views of the episode store (format 1.3, info.json sample_storage "episodes"),
+a static or slip sample's arrays are its frames of that store (index columns episode_index
+and frame_row), read through the episodes (`EpisodeData.read_frames`): there is no
+data/static.zarr or data/slip.zarr to open.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ import zarr
 
 from ...errors import VtsError
 from ..format.arrays import depth_to_mm, zarr_problems
-from ..format.index import counts_problems, ids_problems, read_index
+from ..format.index import counts_problems, ids_problems, read_index, view_problems
 from ..format.info import DatasetInfo, load_info
 from ..format.layout import (
     DECODED_DTYPES,
@@ -45,15 +49,23 @@ from .view import View
 if TYPE_CHECKING:
     import pyarrow as pa
 
-    from .episodes import Episodes
+    from .episodes import EpisodeData, Episodes
+
 
 class KindStore:
-    """One kind's index (pyarrow Table) and its Zarr arrays, opened lazily once per process."""
+    """One kind's index (pyarrow Table) and its Zarr arrays, opened lazily once per process;
+    or, where the samples are views of the episode store (format 1.3), the episodes whose
+    frames they are (`episodes`, set by the dataset)."""
 
     def __init__(self, loc: Location, kind: str, info: DatasetInfo, table: pa.Table) -> None:
         self.loc, self.kind, self.info, self.table = loc, kind, info, table
         self.rows = table.column("row").to_numpy().astype(np.int64)
         self.metadata_checked = False
+        views = info.views and kind in KINDS and "frame_row" in table.column_names
+        #: format 1.3: each sample's first frame row in the episode store, by sample row
+        self.frame_row = (table.column("frame_row").to_numpy().astype(np.int64) if views
+                          else None)
+        self.episodes: EpisodeData | None = None
         self._reset()
 
     def _reset(self) -> None:
@@ -64,7 +76,8 @@ class KindStore:
         self._pos_of: dict[str, int] | None = None
 
     def __getstate__(self) -> dict[str, Any]:
-        keep = ("loc", "kind", "info", "table", "rows", "metadata_checked")
+        keep = ("loc", "kind", "info", "table", "rows", "metadata_checked", "frame_row",
+                "episodes")
         return {k: self.__dict__[k] for k in keep}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -86,6 +99,10 @@ class KindStore:
 
     def array(self, name: str) -> Any:
         """A zarr array of this kind, opened on first use in this process."""
+        if self.frame_row is not None:
+            raise VtsError(f"the {self.kind} samples are views of the episode store (format "
+                           f"{self.info.format_version}): no {group_path(self.kind)} to open",
+                           self.loc.url)
         if self._pid != os.getpid():
             self._pid, self._group, self._arrays = os.getpid(), None, {}
         if name not in self._arrays:
@@ -178,6 +195,8 @@ class KindStore:
         check_arrays(self.info, names)
         if frames is not None and self.kind != "slip":
             raise VtsError("frames apply to slip sequences only")
+        if self.frame_row is not None:
+            return self._read_views(np.asarray(rows, np.int64), names, frames)
         uniq, inverse = np.unique(rows, return_inverse=True)
         cuts = np.flatnonzero(np.diff(uniq) != 1) + 1
         runs = [(int(r[0]), int(r[-1]) + 1) for r in np.split(uniq, cuts) if len(r)]
@@ -196,6 +215,24 @@ class KindStore:
                 data = _depth_mm(data, self.info.depth_scale_mm)
             out[n] = data
         return out
+
+    def _read_views(self, rows: np.ndarray, names: Sequence[str],
+                    frames: np.ndarray | None) -> dict[str, np.ndarray]:
+        """Arrays of samples that are views of the episode store (format 1.3): the store
+        rows of their frames (frame_row + 0..T-1, or the `frames` asked for) read in one
+        batched call through the episodes, each row once, then shaped (n, [T,] H, W[, 3])."""
+        assert self.frame_row is not None
+        if self.episodes is None:
+            raise VtsError(f"the {self.kind} samples are views of the episode store, and it is "
+                           "not open (read them from vtsbench.load)", self.loc.url)
+        slip = self.kind == "slip"
+        offsets = np.arange(self.info.frames_per_sequence if slip else 1, dtype=np.int64)
+        if frames is not None:
+            offsets = offsets[np.asarray(frames, np.int64)]
+        want = self.frame_row[rows][:, None] + offsets[None, :]
+        data = self.episodes.read_frames(want.reshape(-1), names)
+        lead = (len(rows), len(offsets)) if slip else (len(rows),)
+        return {n: a.reshape(*lead, *a.shape[1:]) for n, a in data.items()}
 
 
 
@@ -247,6 +284,10 @@ class VtsDataset:
         self.loc, self.info, self.allow_leaks = loc, info, allow_leaks
         self._kinds = {k: KindStore(loc, k, info, tables[k]) for k in KINDS}
         self._splits: dict[str, SplitFile] = {}
+        if info.views:  # format 1.3: the samples read their frames from the episodes
+            data = self.episodes.data
+            for ks in self._kinds.values():
+                ks.episodes = data
 
     def __repr__(self) -> str:
         return (f"VtsDataset({self.info.name!r} {self.info.dataset_version}, "
@@ -368,11 +409,13 @@ def load(path_or_url: str | os.PathLike, *,
 
     Reads meta/info.json (refusing an unknown format major version) and the two indexes
     (`format.index.read_index`, fetched whole from a URL), with format 1.2 the episode and frame
-    indexes (`ds.episodes`), and checks them as `vtsbench verify` does; split files are checked
-    when first used (`splits.leaks.split_problems`), the Zarr metadata on the first read
-    (`format.arrays.zarr_problems`). A split that leaks (a sample in two parts, or parts
-    sharing an object, session or location their rules keep apart) is refused unless
-    allow_leaks=True. storage_options go to fsspec for URLs.
+    indexes (`ds.episodes`), with format 1.3 every sample's frames inside its episode
+    (`format.index.view_problems`), and checks them as `vtsbench verify` does; split files are
+    checked when first used (`splits.leaks.split_problems`), the Zarr metadata on the first
+    read (`format.arrays.zarr_problems`). A split that leaks (a sample in two parts, parts
+    sharing an object, session or location their rules keep apart, or with format 1.3 a frame
+    of the episode store) is refused unless allow_leaks=True. storage_options go to fsspec
+    for URLs.
     """
     loc = Location(path_or_url, storage_options)
     if not loc.remote and not Path(loc.url).is_dir():
@@ -392,4 +435,12 @@ def load(path_or_url: str | os.PathLike, *,
     ds = VtsDataset(loc, info, tables, allow_leaks)
     if info.episodes is not None:
         ds.episodes  # noqa: B018 (read and checked now, as the indexes are)
+    if info.views:  # every sample's frames inside its episode
+        data = ds.episodes.data
+        for kind in KINDS:
+            bad = view_problems(tables[kind], kind, info.frames_per_sequence, data.starts,
+                                data.lengths)
+            if bad:
+                more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
+                raise VtsError(f"{bad[0]}{more}", loc.path(index_path(kind)))
     return ds

@@ -5,15 +5,16 @@ a worker moves a quarter of the bytes of float32 rgb through the DataLoader's sh
 makes no float copy; the model converts (`as_float`, or `x.float().div_(255)`), on its device.
 `dtype="float32"` gives the float tensors of earlier versions bit for bit (rgb in [0, 1], torch's
 antialiased bilinear resize). A batch (DataLoader's `__getitems__`) reads its rows in row order,
-one store read per run of consecutive rows, and resizes and converts each run in one pass. The
-Zarr arrays are opened lazily in each worker process, never pickled. This module imports torch:
-import it only where torch is wanted.
+one store read per run of consecutive rows, and writes each frame once into the batch's tensors,
+which default_collate hands on without stacking again (`torch_batch`). The Zarr arrays are
+opened lazily in each worker process, never pickled. This module imports torch: import it only
+where torch is wanted.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -23,6 +24,7 @@ from torch.utils.data import Dataset
 
 from ...errors import VtsError
 from ...labels import DIRECTION_NAMES, MIRROR_X, STATES
+from .torch_batch import batch_of, batch_tensors, in_worker, item_at, put_frames
 
 if TYPE_CHECKING:
     from .episodes import Windows
@@ -80,39 +82,6 @@ def resize(x: torch.Tensor, size: tuple[int, int], mode: str = "bilinear") -> to
         out = F.interpolate(flat, size=size, mode="bilinear", align_corners=False,
                             antialias=True)
     return out.reshape(*lead, *out.shape[-3:])
-
-
-def resize_frames(a: np.ndarray, size: tuple[int, int], channels: bool = False) -> np.ndarray:
-    """Frames (..., H, W) or (..., H, W, C) with `channels` resized to size = (h, w) with
-    OpenCV, each written into one output buffer: INTER_AREA (pixel-area averaging, the
-    resampling for shrinking) for uint8 and float frames, nearest for bool masks."""
-    import cv2
-
-    h, w = size
-    frame_dims = 3 if channels else 2
-    if tuple(a.shape[-frame_dims:][:2]) == (h, w):
-        return a
-    lead = a.shape[:-frame_dims]
-    src = a.view(np.uint8) if a.dtype == bool else a
-    flat = src.reshape(-1, *src.shape[-frame_dims:])
-    out = np.empty((len(flat), h, w, *flat.shape[3:]), src.dtype)
-    how = cv2.INTER_NEAREST if a.dtype == bool else cv2.INTER_AREA
-    for k in range(len(flat)):
-        cv2.resize(flat[k], (w, h), dst=out[k], interpolation=how)
-    out = out.reshape(*lead, *out.shape[1:])
-    return out.view(bool) if a.dtype == bool else out
-
-
-def channels_first(a: np.ndarray) -> np.ndarray:
-    """(..., H, W, C) uint8 frames as a new contiguous (..., C, H, W) array, split plane by plane
-    with OpenCV (SIMD: about 3x numpy's transposing copy and 5x torch's)."""
-    import cv2
-
-    out = np.empty((*a.shape[:-3], a.shape[-1], *a.shape[-3:-1]), a.dtype)
-    src, dst = a.reshape(-1, *a.shape[-3:]), out.reshape(-1, *out.shape[-3:])
-    for k in range(len(src)):
-        cv2.split(src[k], list(dst[k]))
-    return out
 
 
 def as_float(x: Any, device: Any = None) -> torch.Tensor:
@@ -177,36 +146,46 @@ class TorchView(Dataset):
                 f"dtype={self.dtype})")
 
     def __getitem__(self, i: int) -> tuple[Any, dict[str, Any]]:
-        return self.__getitems__([i])[0]
+        return tuple(self.__getitems__([i])[0])  # type: ignore[return-value]
 
     def __getitems__(self, items: Sequence[int]) -> list[tuple[Any, dict[str, Any]]]:
         """Several items read together (DataLoader calls this for a batch): their rows sorted
-        and read with one store read per contiguous run, resized and converted run by run."""
+        and read with one store read per contiguous run, each frame written (resized, channels
+        first) into its place in the batch's tensors, of which the items are views; without
+        transforms, default_collate hands those tensors on (`collate_batch`)."""
         items = [int(i) for i in items]
         metas = self.view.metas(items)
-        out: list[tuple[Any, dict[str, Any]] | None] = [None] * len(items)
-        for ks, arrays in self._runs(items):
-            if self.dtype == "float32":
+        if self.dtype == "float32":
+            out: list[Any] = [None] * len(items)
+            for ks, arrays in self._runs(items):
                 for j, k in enumerate(ks):
                     a = {n: v[j] for n, v in arrays.items()}
                     out[k] = self._item(self._float_tensor(a),
                                         self._target(metas[k], self._float_arrays(a)))
-                continue
-            batch = self._uint8_batch(arrays)
-            for j, k in enumerate(ks):
-                x = {n: batch[n][j] for n in self.inputs}
-                x = x.pop(self.modality) if self.modality in x else x
-                spatial = {n: batch[n][j] for n in self.targets}
-                if "depth" in spatial and "depth" in self.inputs:  # not one tensor twice
-                    spatial["depth"] = spatial["depth"].clone()
-                spatial = {n: a[..., 0, :, :] if n == "depth" else a
-                           for n, a in spatial.items()}
-                out[k] = self._item(x, self._target(metas[k], spatial))
-        return out  # type: ignore[return-value]
+            return out
+        plain = self.transforms is None and self.transform is None \
+            and self.target_transform is None
+        shared = plain and in_worker()
+        bufs: dict[str, torch.Tensor] = {}
+        for ks, arrays in self._runs(items):
+            bufs = bufs or batch_tensors(arrays, len(items), self.inputs, self.size, shared)
+            for name, a in arrays.items():
+                dst = bufs[name].numpy()
+                for j, k in enumerate(ks):
+                    put_frames(name, a[j], dst[k])
+        if not items:
+            return []
+        whole = batch_of(bufs, self.inputs, self.modality, self.targets, shared)
+        out = []
+        for k, meta in enumerate(metas):
+            x = item_at(whole.x, k)
+            target = self._target(meta, {n: t[k] for n, t in whole.spatial.items()})
+            out.append(whole.add(x, target) if plain else self._item(x, target))
+        return out
 
-    def _runs(self, items: list[int]) -> list[tuple[list[int], dict[str, np.ndarray]]]:
+    def _runs(self, items: list[int]) -> Iterator[tuple[list[int], dict[str, np.ndarray]]]:
         """The items' arrays, one store read per run of consecutive rows (in row order), as
-        (the items' places in `items`, their arrays) per run.
+        (the items' places in `items`, their arrays) per run, read as they are used.
 
         One read per run rather than one for the whole batch: the loader would copy the runs
         into one batch array (and make its depth in mm at batch size, past the allocator's
@@ -214,31 +193,13 @@ class TorchView(Dataset):
         at 480x640 measured 15 against 20 ms of CPU a sample (rgbd, one thread).
         """
         if not items:
-            return []
+            return
         rows = self.view.rows[np.asarray(items, np.int64)]
         order = np.argsort(rows, kind="stable")
         cuts = np.flatnonzero(np.diff(rows[order]) != 1) + 1
-        runs = []
         for run in np.split(order, cuts):
             ks = [int(k) for k in run]
-            runs.append((ks, self.view.read([items[k] for k in ks], self.arrays,
-                                            frames=self.frames)))
-        return runs
-
-    def _uint8_batch(self, arrays: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
-        """A run's tensors: frames resized (OpenCV, while still uint8), rgb as contiguous
-        (B, ..., 3, h, w) uint8, depth (B, ..., 1, h, w) mm, contact (B, ..., h, w) bool."""
-        size = self.size
-        out = {}
-        for name, a in arrays.items():
-            if name == "rgb":
-                a = a if size is None else resize_frames(a, size, channels=True)
-                out[name] = torch.from_numpy(channels_first(a))
-            else:
-                a = a if size is None else resize_frames(a, size)
-                t = torch.from_numpy(np.ascontiguousarray(a))
-                out[name] = t.unsqueeze(-3) if name == "depth" else t
-        return out
+            yield ks, self.view.read([items[k] for k in ks], self.arrays, frames=self.frames)
 
     @property
     def classes(self) -> list[str]:
@@ -458,33 +419,28 @@ class TorchWindows(Dataset):
                 f"modality={self.modality}, size={self.size}, dtype={self.dtype})")
 
     def __getitem__(self, i: int) -> tuple[Any, dict[str, Any]]:
-        return self.__getitems__([i])[0]
+        return tuple(self.__getitems__([i])[0])  # type: ignore[return-value]
 
     def __getitems__(self, items: Sequence[int]) -> list[tuple[Any, dict[str, Any]]]:
-        """Several items from one `Windows.read` of their frames, resized in one pass."""
+        """Several items from one `Windows.read` of their frames, written (resized, channels
+        first) into the batch's tensors, of which the items are views (as TorchView's)."""
         items = [int(i) for i in items]
         if not items:
             return []
         b = self.windows.read(items, self.arrays)
-        size = self.size
-        t: dict[str, torch.Tensor] = {}
-        for name in self.arrays:
-            a = b[name]
-            if name == "rgb":
-                a = a if size is None else resize_frames(a, size, channels=True)
-                t[name] = torch.from_numpy(channels_first(a))
-            else:
-                a = a if size is None else resize_frames(a, size)
-                t[name] = torch.from_numpy(np.ascontiguousarray(a))
+        plain = self.dtype == "uint8" and self.transforms is None and self.transform is None \
+            and self.target_transform is None
+        shared = plain and in_worker()
+        bufs = batch_tensors({n: b[n] for n in self.arrays}, len(items), self.inputs,
+                              self.size, shared)
+        for name, t in bufs.items():
+            put_frames(name, b[name], t.numpy())
+        whole = batch_of(bufs, self.inputs, self.modality, self.targets, shared)
         out = []
         for j in range(len(items)):
-            x: Any = {n: t[n][j] for n in self.inputs}
-            if "depth" in x:
-                x["depth"] = x["depth"].unsqueeze(-3)
+            x = item_at(whole.x, j)
             if self.dtype == "float32":
-                x = as_float(x) if self.modality == "rgbd" else as_float(x[self.modality])
-            else:
-                x = x.pop(self.modality) if self.modality in x else x
+                x = as_float(x)
             target: dict[str, Any] = {
                 "episode_id": b["episode_id"][j], "episode_index": int(b["episode_index"][j]),
                 "frame_index": torch.from_numpy(b["frame_index"][j].copy()),
@@ -492,9 +448,8 @@ class TorchWindows(Dataset):
                 "state": torch.from_numpy(b["state"][j].astype(np.int64)),
                 "direction": torch.from_numpy(b["direction"][j].astype(np.int64)),
                 "pad_mask": torch.from_numpy(b["pad_mask"][j].copy())}
-            for name in self.targets:
-                target[name] = t[name][j].clone() if name in self.inputs else t[name][j]
-            out.append(self._item(x, target))
+            target.update({n: t[j] for n, t in whole.spatial.items()})
+            out.append(whole.add(x, target) if plain else self._item(x, target))
         return out
 
     _item = TorchView._item  # transforms, then transform, then target_transform

@@ -1,17 +1,21 @@
 """Split schemes over episodes (format 1.2): whole episodes held out by object
 (`unseen_objects`) or by session (`unseen_sessions`), made by the fixed schemes' makers
-(schemes.py) on one record per episode and written as split files of kind "episode" whose ids
-are episode ids. Windows never cross episodes, so a split of episodes is a split of windows.
+(schemes.py) on one record per episode, the objects a lab gives (`given_objects`, given.py's
+rule), and splits a caller gives (`check_episode_split`); all written as split files of kind
+"episode" whose ids are episode ids. Windows never cross episodes, so a split of episodes is a
+split of windows.
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from ...errors import VtsError
 from ..format.records import SampleMeta, SplitFile
+from .given import objects_split
 from .leaks import check_split
 from .schemes import (
     TEST_FRACTION,
@@ -47,11 +51,30 @@ def _metas(episodes: pa.Table, kind: str) -> list[SampleMeta]:
             in enumerate(zip(ids, objs, sess, strict=True))]
 
 
+def given_objects_episodes(episodes: pa.Table, held_out: Sequence[str], *, seed: int = 0,
+                           val_fraction: float = 0.1, source: str = "") -> SplitFile:
+    """given_objects over whole episodes: test every episode of the listed objects, val the
+    episodes of whole objects drawn seeded from the rest (given.py's rule, the samples' draw
+    when the objects are the same), train the others. A listed object of no episode, or a
+    list holding out every object, is one line."""
+    ids, objs = (episodes.column(c).to_pylist() for c in ("episode_id", "object"))
+    sp = objects_split(sorted(zip(ids, objs, strict=True)), held_out, kind=EPISODE,
+                       what="episode", seed=seed, val_fraction=val_fraction, source=source)
+    p = sp.params
+    return replace(sp, description=(
+        f"the episodes of the {len(p['held_out_objects'])} given objects as test; those of "
+        f"{len(p['val_objects'])} other whole objects as val (seeded); train the remaining "
+        f"{len(p['train_objects'])} objects' episodes"))
+
+
 def make_episode_splits(episodes: pa.Table, *, seed: int = 0, unseen_k: int | None = None,
-                        val_fraction: float = 0.1,
-                        test_fraction: float = TEST_FRACTION) -> SplitReport:
+                        val_fraction: float = 0.1, test_fraction: float = TEST_FRACTION,
+                        holdout_objects: Sequence[str] | None = None,
+                        source: str = "") -> SplitReport:
     """Every episode scheme the episodes allow, leak-checked; the others skipped with the
-    reason. Same episodes and seed: the same split files, byte for byte."""
+    reason; with holdout_objects also given_objects (a list that does not fit the episodes is
+    an error, never skipped: it was asked for). Same episodes and seed: the same split files,
+    byte for byte."""
     if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
         raise VtsError(f"seed must be a non-negative integer, got {seed!r:.80}")
     report = SplitReport()
@@ -77,6 +100,9 @@ def make_episode_splits(episodes: pa.Table, *, seed: int = 0, unseen_k: int | No
     except VtsError as e:
         report.skipped["unseen_sessions"] = (str(e).replace("static_sessions", "unseen_sessions")
                                              .replace("sample", "episode"))
+    if holdout_objects is not None:
+        report.splits.append(given_objects_episodes(episodes, holdout_objects, seed=seed,
+                                                    val_fraction=val_fraction, source=source))
     table = split_table(episodes)
     for sp in report.splits:
         leaks = episode_leaks(sp, table)
@@ -91,9 +117,36 @@ def episode_leaks(split: SplitFile, table: pa.Table) -> list[str]:
     found = check_split(split, {EPISODE: table})
     unknown = [f"episode {i!r} in {p} is not in the dataset"
                for p, ids in found.unknown.items() for i in ids.to_pylist()]
-    return unknown + found.leaks + found.problems
+    leaks = [re.sub(r"^(\d+ )?sample(s?) ", r"\1episode\2 ", x) for x in found.leaks]
+    return unknown + leaks + found.problems
 
 
 def split_sizes(splits: Sequence[SplitFile]) -> Mapping[str, dict[str, int]]:
     """Episodes per part of every split (info.json counts.splits)."""
     return {sp.name: {p: len(ids) for p, ids in sp.parts.items()} for sp in splits}
+
+
+def check_episode_split(split: SplitFile, episodes: pa.Table, source: str = "") -> None:
+    """Refuse a split of episodes a caller gives (`add_split`, `--split-file`) whose parts
+    name an id of no episode, hold an episode twice or in two parts, or break its disjoint
+    rules: one line, the first problem and how many more."""
+    if split.kind != EPISODE:
+        raise VtsError(f"split {split.name!r} is of kind {split.kind!r}, not {EPISODE!r}",
+                       source or None)
+    leaks = episode_leaks(split, split_table(episodes))
+    if leaks:
+        more = f" (and {len(leaks) - 1} more)" if len(leaks) > 1 else ""
+        raise VtsError(f"split {split.name} leaks: {leaks[0]}{more}", source or None)
+
+
+def same_held_out(samples: SplitFile, episodes: SplitFile) -> list[str]:
+    """The samples' given_objects and the episodes' one (a dataset with both) hold out the
+    same objects: one line when they do not (a model tested on one would have trained on the
+    other's test objects)."""
+    a = sorted(samples.params.get("held_out_objects") or [])
+    b = sorted(episodes.params.get("held_out_objects") or [])
+    if a == b:
+        return []
+    return [f"the samples' {samples.name} holds out {', '.join(a) or 'no object'}, the "
+            f"episodes' {episodes.name} {', '.join(b) or 'no object'}: a dataset's two "
+            "given_objects splits hold out the same objects"]

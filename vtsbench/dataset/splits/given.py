@@ -3,7 +3,8 @@
 `vtsbench build --holdout-objects FILE` makes the scheme `given_objects`, whose test part is
 exactly the listed objects' samples and whose validation part is whole objects drawn (seeded)
 from the rest; `--split-file FILE` adds a scheme written in schemas/split.schema.json. Both are
-leak-checked with the built-in schemes before any frame is converted.
+leak-checked with the built-in schemes before any frame is converted. The same rule over whole
+episodes (`objects_split`) is splits/episodes.py's `given_objects_episodes`.
 """
 
 from __future__ import annotations
@@ -12,9 +13,11 @@ import json
 import math
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 from ...errors import VtsError
 from ...jsonio import read_bytes
+from ..format.layout import KINDS
 from ..format.records import SampleMeta, SplitFile, schema_errors
 from .leaks import leak_check
 from .schemes import SCHEMES, rng_for
@@ -40,12 +43,25 @@ def read_object_list(path: str | Path) -> list[str]:
     names = [n for n in names if n and not n.startswith("#")]
     if not names:
         raise VtsError("lists no object (one object name a line)", path)
+    return check_object_list(names, path)
+
+
+def check_object_list(names: Any, source: str | Path | None = None) -> list[str]:
+    """A list of held-out object names: non-empty text, none with control characters, none
+    twice (one line naming the first bad one; `source` the file or call it came from)."""
+    if isinstance(names, str) or not isinstance(names, Sequence) or not names:
+        raise VtsError(f"{GIVEN}: the held-out objects must be a non-empty list of object "
+                       f"names, got {names!r:.80}", source)
+    names = list(names)
+    at = next((i for i, n in enumerate(names) if not isinstance(n, str) or not n.strip()), None)
+    if at is not None:
+        raise VtsError(f"{GIVEN}: object name {names[at]!r:.80} is not a non-empty text", source)
     bad = next((n for n in names if any(ord(c) < 32 for c in n)), None)
     if bad is not None:
-        raise VtsError(f"object name {bad!r} holds control characters", path)
+        raise VtsError(f"object name {bad!r} holds control characters", source)
     dup = next((n for n in names if names.count(n) > 1), None)
     if dup is not None:
-        raise VtsError(f"object {dup!r} listed twice", path)
+        raise VtsError(f"object {dup!r} listed twice", source)
     return names
 
 
@@ -59,15 +75,25 @@ def given_objects_split(samples: Iterable[SampleMeta], held_out: Sequence[str], 
     in no sample is an error naming it, as is a list that leaves no object to train on."""
     ss = sorted(samples, key=lambda s: s.sample_id)
     kind = "slip" if any(s.kind == "slip" for s in ss) else "static"
-    ss = [s for s in ss if s.kind == kind]
-    if not ss:
-        raise VtsError(f"{GIVEN}: no samples")
-    objects = sorted({s.object for s in ss})
+    return objects_split([(s.sample_id, s.object) for s in ss if s.kind == kind], held_out,
+                         kind=kind, what=f"{kind} sample", seed=seed,
+                         val_fraction=val_fraction, source=source)
+
+
+def objects_split(items: Sequence[tuple[str, str]], held_out: Sequence[str], *, kind: str,
+                  what: str, seed: int = 0, val_fraction: float = 0.1,
+                  source: str = "") -> SplitFile:
+    """The given_objects rule over (id, object) pairs of one kind (samples or episodes, named
+    `what` in the errors): test every id of the listed objects, val whole objects drawn seeded
+    from the rest, train the others; the same objects and seed give the same parts."""
+    if not items:
+        raise VtsError(f"{GIVEN}: no {what}s", source or None)
+    objects = sorted({o for _, o in items})
     missing = [o for o in held_out if o not in objects]
     if missing:
         near = [o for o in objects if any(m.lower() == o.lower() for m in missing)]
         hint = f" (differs in case from {', '.join(near)})" if near else ""
-        raise VtsError(f"{GIVEN}: {len(missing)} listed object(s) have no {kind} sample, first "
+        raise VtsError(f"{GIVEN}: {len(missing)} listed object(s) have no {what}, first "
                        f"{missing[0]!r}{hint}; the dataset's objects: "
                        f"{', '.join(objects[:12])}{', ...' if len(objects) > 12 else ''}",
                        source or None)
@@ -84,8 +110,8 @@ def given_objects_split(samples: Iterable[SampleMeta], held_out: Sequence[str], 
     val_objs = sorted(rest[i] for i in rng.permutation(len(rest))[:n_val])
     part_of = {o: "test" for o in test_objs} | {o: "val" for o in val_objs}
     parts: dict[str, list[str]] = {"train": [], "val": [], "test": []}
-    for s in ss:
-        parts[part_of.get(s.object, "train")].append(s.sample_id)
+    for i, o in items:
+        parts[part_of.get(o, "train")].append(i)
     if not parts["val"]:
         del parts["val"]
     params = {"held_out_objects": test_objs, "val_objects": val_objs,
@@ -126,7 +152,11 @@ def _no_constant(name: str) -> float:
 
 
 def check_given(split: SplitFile, samples: Sequence[SampleMeta], source: str) -> None:
-    """Refuse a given split whose parts name samples the build does not make, or that leaks."""
+    """Refuse a given split whose parts name samples the build does not make, or that leaks;
+    a split of episodes is checked where episodes are built (`--store episodes`)."""
+    if split.kind not in KINDS:
+        raise VtsError(f"split {split.name!r} is a split of {split.kind}s, not of static or slip "
+                       "samples: `vtsbench build --store episodes` takes it", source)
     problems = leak_check(split, samples)
     if problems:
         more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""

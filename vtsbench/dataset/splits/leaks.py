@@ -3,6 +3,9 @@ two parts, and values of a disjoint rule's key (object, session, location) share
 rule keeps apart. The build runs it on every split it makes or is given, before any frame is
 converted (`leak_check`: one line per offending sample), the loader and `vtsbench verify` on
 every split file against the dataset's index (`split_problems`: one line per kind of problem).
+Where the samples are views of the episode store (format 1.3), a frame row held by samples of
+two parts is a leak too (overlapping windows of one take in train and test): the caller passes
+each sample's frame rows (`frames`), so no later stage is imported here.
 """
 
 from __future__ import annotations
@@ -13,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..format.index import column_values
+from ..format.index import column_values, frame_rows, view_columns
 from ..format.info import DatasetInfo
 from ..format.layout import KINDS, index_path
 from ..format.problems import SHOWN, first, short
@@ -47,11 +50,15 @@ class SplitCheck:
     leaks: list[str] = field(default_factory=list)
 
 
-def check_split(split: SplitFile, tables: Mapping[str, pa.Table]) -> SplitCheck:
+def check_split(split: SplitFile, tables: Mapping[str, pa.Table],
+                frames: np.ndarray | None = None) -> SplitCheck:
     """Check a split against the index of each kind (kind -> table with sample_id and, for the
     split's kind, the columns its rules key on: object, session, contact_x_px). Leaks are ids
     repeated in a part or found in two parts, and values of a rule's key shared by two parts
-    it keeps apart (location: whether the contact x lies in params.location.bands_px)."""
+    it keeps apart (location: whether the contact x lies in params.location.bands_px).
+    frames: the episode-store rows of each sample of the split's kind, (n, T) in table order,
+    where the samples are views of the episode store (format 1.3): a row held by samples of
+    two parts is a leak (`frame_leaks`)."""
     import pyarrow as pa
     import pyarrow.compute as pc
 
@@ -95,7 +102,44 @@ def check_split(split: SplitFile, tables: Mapping[str, pa.Table]) -> SplitCheck:
         bad, leaks = _rule_leaks(split, rule, order, table, pos)
         found.problems += bad
         found.leaks += leaks
+    if frames is not None:
+        found.leaks += frame_leaks(order, pos, np.asarray(frames, np.int64),
+                                   ids_col.to_pylist())
     return found
+
+
+def frame_leaks(order: Sequence[str], pos: Mapping[str, np.ndarray], frames: np.ndarray,
+                ids: Sequence[str]) -> list[str]:
+    """Per pair of parts, one line when samples of both hold a frame row of the episode store:
+    how many rows, and the first one with a sample of each part holding it. frames: (n, T)
+    rows of every sample (by table position); pos: each part's table positions."""
+    frames = frames.reshape(len(frames), -1)
+    per = {p: np.unique(frames[pos[p]]) for p in order}
+    out = []
+    for i, a in enumerate(order):
+        for b in order[i + 1:]:
+            both = np.intersect1d(per[a], per[b], assume_unique=True)
+            if not len(both):
+                continue
+            r = int(both[0])
+
+            def holder(part: str, r: int = r) -> str:
+                at = pos[part][(frames[pos[part]] == r).any(axis=1)]
+                return short(ids[int(at[0])])
+
+            more = f" and {len(both) - 1} more" if len(both) > 1 else ""
+            out.append(f"samples {holder(a)!r} ({a}) and {holder(b)!r} ({b}) share frame row "
+                       f"{r}{more} of the episode store (overlapping views of one take in "
+                       f"{a} and {b})")
+    return out
+
+
+def sample_frames(table: pa.Table, kind: str, info: DatasetInfo) -> np.ndarray | None:
+    """The episode-store rows of each sample of an index table, (n, T), where info.json says the
+    samples are views of it (format 1.3); None otherwise (or without the view columns)."""
+    if not info.views or "frame_row" not in view_columns(table):
+        return None
+    return frame_rows(table, kind, info.frames_per_sequence)
 
 
 def _rule_leaks(split: SplitFile, rule: str, order: list[str], table: pa.Table,
@@ -132,14 +176,16 @@ def _rule_leaks(split: SplitFile, rule: str, order: list[str], table: pa.Table,
     return [], leaks
 
 
-def leak_check(split: SplitFile, samples: Iterable[SampleMeta]) -> list[str]:
+def leak_check(split: SplitFile, samples: Iterable[SampleMeta],
+               frames: np.ndarray | None = None) -> list[str]:
     """The build's check of a split against the samples it makes (`check_split`): every id
     unknown or of the other kind, one line each, then every leak, named by the split; an
-    empty list when the split is clean."""
+    empty list when the split is clean. frames (samples as views of the episode store): the
+    store rows of each sample of the split's kind, (n, T), in the order `samples` gives them."""
     by_kind: dict[str, list[SampleMeta]] = {k: [] for k in KINDS}
     for s in samples:
         by_kind[s.kind].append(s)
-    found = check_split(split, {k: _table(ss) for k, ss in by_kind.items()})
+    found = check_split(split, {k: _table(ss) for k, ss in by_kind.items()}, frames)
     other = next(k for k in KINDS if k != split.kind)
     out = []
     for part in sorted(split.parts, key=part_key):
@@ -178,7 +224,7 @@ def split_problems(split: SplitFile, name: str, info: DatasetInfo,
                    f"says {want.get(p, 'none')}")
     if tables.get(split.kind) is None:
         return out, []
-    found = check_split(split, tables)
+    found = check_split(split, tables, sample_frames(tables[split.kind], split.kind, info))
     for part in sorted(split.parts, key=part_key):
         wrong: Any = found.other_kind.get(part)
         unknown: Any = found.unknown.get(part)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import math
+import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
@@ -165,6 +166,37 @@ def _take(ids: list[str], fraction: float, rng: np.random.Generator) -> list[str
     return sorted(ids[i] for i in pick)
 
 
+#: A sample's source, `path[start:stop]`: its take is the path.
+_SOURCE = re.compile(r"(.*)\[\d+:\d+\]")
+
+
+def take_of(source: str) -> str:
+    """The take (source file or folder) of a sample's `source` field."""
+    m = _SOURCE.fullmatch(source)
+    return m.group(1) if m else source
+
+
+def _take_takes(samples: list[SampleMeta], fraction: float, rng: np.random.Generator
+                ) -> list[str]:
+    """A seeded slice of whole takes holding about `fraction` of the samples: windows cut from
+    one take (overlapping or not) never straddle two parts. When every take holds one sample,
+    exactly `_take` over the sample ids (the splits of such datasets keep their bytes)."""
+    ids = [s.sample_id for s in samples]
+    groups: dict[str, list[str]] = {}
+    for s in samples:
+        groups.setdefault(take_of(s.source), []).append(s.sample_id)
+    if all(len(g) == 1 for g in groups.values()):
+        return _take(ids, fraction, rng)
+    takes = sorted(groups)
+    want = math.floor(fraction * len(ids) + 0.5)
+    picked: list[str] = []
+    for i in rng.permutation(len(takes)):
+        if len(picked) >= want:
+            break
+        picked += groups[takes[i]]
+    return sorted(picked)
+
+
 def _parts(**parts: list[str]) -> dict[str, list[str]]:
     """Parts in order, an empty val left out."""
     return {p: sorted(v) for p, v in parts.items() if v or p != "val"}
@@ -219,8 +251,9 @@ def unseen_objects_split(samples: Iterable[SampleMeta], *, seed: int = 0, k: int
         for st in present:
             ids = by_state[st]
             test += [ids[i] for i in sorted(rng.choice(len(ids), size=m, replace=False))]
-    seen_ids = [s.sample_id for s in slip if s.object not in held]
-    val = _take(seen_ids, val_fraction, rng)
+    seen = [s for s in slip if s.object not in held]
+    seen_ids = [s.sample_id for s in seen]
+    val = _take_takes(seen, val_fraction, rng)
     train = sorted(set(seen_ids) - set(val))
     params = {"k": k, "held_out_objects": held,
               "seen_objects": [o for o in objects if o not in held],

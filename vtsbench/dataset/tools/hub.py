@@ -7,6 +7,10 @@ every split of every scheme is a list of whole files: the card's YAML `configs` 
 `slip_<scheme>` and `static_<scheme>` configs whose splits point at those files, and no sample is
 stored twice however many schemes hold it.
 
+A dataset with episodes (format 1.2) also gets hf/episodes/ (hub_episodes: LeRobot v2.1's
+meta files and one parquet file per episode, a row per frame with its timestamp), read by the
+`episodes` config and one `episodes_<scheme>` config per split of episodes.
+
 Columns (layout version `hub_rows.HUB_VERSION`): the index's labels (object, state and direction
 as ClassLabel ids), then images that `datasets` decodes on access, so its Arrow cache is no larger
 than the parquet: `rgb` as lossless TIFFs (a list of T for a slip sample; uint8), `depth` as 16-bit
@@ -72,8 +76,14 @@ class ExportResult:
         n = sum(f.rows for fs in lay.files.values() for f in fs)
         files = sum(len(fs) for fs in lay.files.values())
         kept = f" ({self.kept} kept from an interrupted export)" if self.kept else ""
-        return (f"{n} samples in {files} parquet files ({human(lay.nbytes())}) in "
-                f"{self.seconds:.1f} s{kept}; configs: {', '.join(lay.configs)}")
+        what = f"{n} samples in {files} parquet files"
+        if lay.episodes is not None:
+            eps = lay.episodes.files
+            frames = f"{len(eps)} episodes ({sum(f.rows for f in eps)} frames) in {len(eps)} " \
+                     "parquet files"
+            what = f"{what} and {frames}" if files else frames
+        return (f"{what} ({human(lay.nbytes())}) in {self.seconds:.1f} s{kept}; configs: "
+                f"{', '.join(lay.all_configs())}")
 
 
 #: The export's state folder inside its stage: a marker per finished parquet file.
@@ -136,6 +146,7 @@ def export_hf(dataset: str | Path, *, workers: int = 1, license: str = "unknown"
     from ..build.finish import hash_files
     from ..build.staging import commit, locked_stage, recover
     from ..read.loader import load
+    from .hub_episodes import remove_episodes, write_episodes
     from .hub_layout import write_hub_card
     from .hub_rows import check_codecs
 
@@ -159,7 +170,8 @@ def export_hf(dataset: str | Path, *, workers: int = 1, license: str = "unknown"
         files: dict[str, list[HubFile]] = {}
         digests: dict[str, str] = {}
         kept: list[str] = []
-        total = sum(len(ds.view(k)) for k in KINDS)
+        n_frames = ds.info.episodes.frames if ds.info.episodes is not None else 0
+        total = sum(len(ds.view(k)) for k in KINDS) + n_frames
         with _progress(progress, total) as advance:
             for kind in KINDS:
                 if len(ds.view(kind)):
@@ -167,8 +179,12 @@ def export_hf(dataset: str | Path, *, workers: int = 1, license: str = "unknown"
                                              stage / EXPORT_WORK, given, digests, kept)
                 else:
                     shutil.rmtree(stage / HUB_DIR / kind, ignore_errors=True)
+            episodes = write_episodes(ds, stage, workers, advance, stage / EXPORT_WORK,
+                                      given, digests, kept) if n_frames else None
+        if episodes is None:
+            remove_episodes(stage)
         configs, kinds = hub_configs(ds, files)
-        layout = HubLayout(files, configs, kinds)
+        layout = HubLayout(files, configs, kinds, episodes)
         write_hub_card(stage, ds, layout, license)
         info = ds.info
         keep = {k: v for k, v in info.files.items()

@@ -77,7 +77,7 @@ def _parquet_options(schema: pa.Schema) -> dict[str, Any]:
             "write_statistics": labels}
 
 
-def _ordered(jobs: list[Any], make: Callable[[Any], Any], workers: int) -> Iterator[Any]:
+def ordered(jobs: list[Any], make: Callable[[Any], Any], workers: int) -> Iterator[Any]:
     """make(job) for every job, run by `workers` threads at most one job ahead each, yielded in
     job order (so at most 2 x workers batches are in memory)."""
     from collections import deque
@@ -108,12 +108,12 @@ def _fingerprint(ds: VtsDataset, schema: pa.Schema, opts: dict[str, Any], rows: 
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
 
 
-def _done(state: Path | None, rel: str) -> Path | None:
+def done_marker(state: Path | None, rel: str) -> Path | None:
     """The marker a finished hub file gets in the export's state folder."""
     return None if state is None else state / "done" / (rel.replace("/", "~") + ".json")
 
 
-def _kept(root: Path, rel: str, marker: Path | None, fp: str) -> dict[str, Any] | None:
+def kept_marker(root: Path, rel: str, marker: Path | None, fp: str) -> dict[str, Any] | None:
     """The marker of a hub file finished by an earlier run with this fingerprint, when the file
     is still there at its size; None otherwise."""
     import json
@@ -183,7 +183,7 @@ def write_kind(ds: VtsDataset, kind: str, root: Path, workers: int = 1,
     digests = {} if digests is None else digests
     done: dict[int, HubFile] = {}
     for k, (rel, c, pos) in enumerate(files):
-        doc = _kept(root, rel, _done(state, rel), fps[k])
+        doc = kept_marker(root, rel, done_marker(state, rel), fps[k])
         if doc is not None:
             done[k] = HubFile(rel, c, len(pos), doc["size"])
             digests[rel] = doc["sha256"]
@@ -213,14 +213,14 @@ def write_kind(ds: VtsDataset, kind: str, root: Path, workers: int = 1,
             size = path.stat().st_size
             done[current] = HubFile(rel, c, len(pos), size)
             digests[rel] = sha256_file(path)
-            marker = _done(state, rel)
+            marker = done_marker(state, rel)
             if marker is not None:
                 marker.parent.mkdir(parents=True, exist_ok=True)
                 write_bytes_atomic(marker, json.dumps({"fingerprint": fps[current], "size": size,
                                                        "sha256": digests[rel]}).encode())
 
     try:
-        for k, table in _ordered(jobs, lambda job: (job[0], rows_table(
+        for k, table in ordered(jobs, lambda job: (job[0], rows_table(
                 _view_at(ds, kind, job[1]), schema)), workers):
             try:
                 if k != current:

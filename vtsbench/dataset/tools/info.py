@@ -3,7 +3,10 @@
 Counts per object (static samples and slip samples per state), per slip direction and per
 split part, sizes on disk per folder against the raw size (uint8 RGB + float32 depth), and
 the versions and checksum that identify the dataset (a dataset built with --no-depth: uint8
-RGB alone). Reads no array data.
+RGB alone). Reads no array data. It says how the frames are stored (Zarr, or the episodes'
+RGB as video with the codec and its settings) and, where the samples are views of the
+episode store (format 1.3), how many episodes, the frames the samples read and those stored
+once.
 """
 
 from __future__ import annotations
@@ -16,7 +19,15 @@ from typing import Any
 from ...labels import DIRECTION_NAMES, STATES
 from ..format.index import read_index
 from ..format.info import DatasetInfo, load_info
-from ..format.layout import DATA_DIR, EPISODES, EPISODES_INDEX, KINDS, index_path
+from ..format.layout import (
+    DATA_DIR,
+    EPISODES,
+    EPISODES_GROUP,
+    EPISODES_INDEX,
+    KINDS,
+    VIDEOS_DIR,
+    index_path,
+)
 
 
 @dataclass
@@ -96,7 +107,9 @@ def _summary(info: DatasetInfo, tables: dict[str, Any], sizes: dict[str, int]) -
             row = by_object.setdefault(obj, {})
             row[key] = row.get(key, 0) + 1
     raw = 0
-    for shapes in info.shapes.values():
+    for kind, shapes in info.shapes.items():
+        if info.views and kind in KINDS:
+            continue  # format 1.3: their frames are the episode store's, counted once
         raw += _prod(shapes["rgb"]) + (4 * _prod(shapes["depth"]) if "depth" in shapes else 0)
     return Summary(info, by_object, dict(sorted(sizes.items())), raw)
 
@@ -117,10 +130,29 @@ def human(n: float) -> str:
     return f"{n:.1f} TB"
 
 
+def views_line(s: Summary) -> str:
+    """Format 1.3: the samples are views of the episodes, their frames stored once."""
+    info, ep = s.info, s.info.episodes
+    assert ep is not None
+    n_static, n_slip = info.counts.static.samples, info.counts.slip.samples
+    t = info.frames_per_sequence
+    def size(group: str) -> str:
+        n = s.sizes.get(group)
+        return f"{group}, {human(n)} ({n} bytes)" if n is not None else group
+
+    where = size(EPISODES_GROUP) if ep.video is None else \
+        f"{size(VIDEOS_DIR)} (RGB) and {size(EPISODES_GROUP)}"
+    return (f"samples: views of {ep.episodes} episodes (frames stored once): {n_static} static "
+            f"frames and {n_slip} slip sequences of {t} read {n_static + n_slip * t} frames "
+            f"from the {ep.frames} stored in {where}")
+
+
 def render(s: Summary, console: Any) -> None:
     """Print the summary as rich tables."""
     from rich.markup import escape
     from rich.table import Table
+
+    from ..build.card import storage_line
 
     info = s.info
     cal = info.calibration
@@ -135,11 +167,14 @@ def render(s: Summary, console: Any) -> None:
                   f"{info.resolution[1]} frames, T = {info.frames_per_sequence}; {depth}"),
                   highlight=False)
     console.print(f"dataset_sha256 {info.dataset_sha256}", highlight=False)
+    console.print(escape(f"frames stored as {storage_line(info)}"), highlight=False)
     ep = info.episodes
     if ep is not None:
         console.print(f"episodes {ep.episodes}, {ep.frames} frames ({ep.dropped_frames} dropped"
                       f"); frames per state: " + ", ".join(f"{k} {v}" for k, v in
                                                            ep.states.items()), highlight=False)
+        if info.views:
+            console.print(views_line(s), highlight=False)
     t = Table(title="samples per object", title_justify="left")
     cols = ["static", *(f"slip:{x}" for x in STATES)]
     if any("slip:unknown" in row for row in s.by_object.values()):

@@ -6,6 +6,12 @@ listed all rather than raised first, plus
 the expensive ones: every file's sha256 (missing and unlisted files too), the dataset checksum,
 and every chunk decoded. Chunks carry a crc32c, so a damaged byte names its array, sample and
 shard; a damaged shard index names the samples of the whole shard. Each problem is one line.
+Where the samples are views of the episode store (format 1.3), their index columns are checked
+against the episodes (every sample's frames inside its episode), split parts sharing a frame
+are leaks, and a data/static.zarr or data/slip.zarr is a problem (there is none to check).
+Where the episodes' RGB is stored as video, the `rgb` array of data/episodes.zarr holds its
+metadata alone (checked as every array's) and no chunk to decode; the videos are probed
+(verify_video.py).
 """
 
 from __future__ import annotations
@@ -19,6 +25,7 @@ import numpy as np
 
 from ...errors import VtsError
 from ..format.arrays import MISSING, Layout
+from ..format.episode_video import stored_codec
 from ..format.info import DatasetInfo, dataset_checksum, load_info
 from ..format.layout import (
     EPISODES,
@@ -32,6 +39,7 @@ from ..format.layout import (
 )
 from ..format.problems import SHOWN
 from ..format.records import SPLIT_NAME
+from .verify_video import check_videos
 
 
 @dataclass
@@ -161,7 +169,20 @@ def check_index(root: Path, info: DatasetInfo, report: VerifyReport) -> dict[str
         report.problems += [f"{EPISODES_INDEX}: {b}" for b in bad]
         if not bad:
             out[EPISODES] = store_table(*tables)  # ids of the frames: `<episode id>/<frame>`
+            if info.views:
+                report.problems += _view_problems(info, out, tables[0])
     return out
+
+
+def _view_problems(info: DatasetInfo, index: dict[str, Any], episodes: Any) -> list[str]:
+    """Format 1.3: every sample's frames inside its episode (`view_problems`, as the loader)."""
+    from ..format.index import view_problems
+
+    starts = episodes.column("frame_start").to_numpy()
+    lengths = episodes.column("length").to_numpy()
+    return [f"{index_path(kind)}: {b}" for kind in KINDS if kind in index
+            for b in view_problems(index[kind], kind, info.frames_per_sequence, starts,
+                                   lengths)]
 
 
 def check_splits(root: Path, info: DatasetInfo, index: dict[str, Any],
@@ -231,7 +252,12 @@ def check_arrays(root: Path, info: DatasetInfo, index: dict[str, Any],
     from ..read.episodes import open_frames_group
     from ..read.store import open_group
 
-    for kind in (k for k in (*KINDS, EPISODES) if k in info.shapes):
+    if info.views:  # format 1.3: the samples' frames are the episode store's, nothing else
+        report.problems += [f"{group_path(k)}: present, and info.json says the {k} samples are "
+                            "views of the episode store (sample_storage "
+                            f"{info.sample_storage!r})" for k in KINDS
+                            if (root / group_path(k)).exists()]
+    for kind in (k for k in (*KINDS, EPISODES) if k in info.shapes and not _viewed(info, k)):
         where = group_path(kind)
         try:
             group = open_group(root, kind) if kind in KINDS else open_frames_group(root)
@@ -255,7 +281,7 @@ def check_arrays(root: Path, info: DatasetInfo, index: dict[str, Any],
         table = index.get(kind)
         ids = [] if table is None else table.column("sample_id").to_pylist()
         sps = info.zarr.samples_per_shard.get(kind, 1)
-        for name in info.arrays:
+        for name in chunked_arrays(info, kind):
             if any(b.startswith(f"{name}:") or b.startswith(f"{name}/") for b in bad):
                 continue
             try:
@@ -273,6 +299,19 @@ def check_arrays(root: Path, info: DatasetInfo, index: dict[str, Any],
                 report.shards += 1
                 if advance is not None:
                     advance(1)
+
+
+def chunked_arrays(info: DatasetInfo, kind: str) -> tuple[str, ...]:
+    """The arrays of a kind whose chunks hold its frames: every array, but the episodes' `rgb`
+    where their RGB is stored as video (its array is metadata alone, by design)."""
+    if kind == EPISODES and stored_codec(info) is not None:
+        return tuple(a for a in info.arrays if a != "rgb")
+    return info.arrays
+
+
+def _viewed(info: DatasetInfo, kind: str) -> bool:
+    """Whether a kind's samples are views of the episode store (no group of their own)."""
+    return info.views and kind in KINDS
 
 
 def _decode_shard(group_dir: Path, lay: Layout, name: str, k: int, arr: Any,
@@ -336,13 +375,15 @@ def _verify(root: Path, decode: bool, progress: bool) -> VerifyReport:
         if bar is not None:
             sps = info.zarr.samples_per_shard
             n_shards = sum(-(-s.get("rgb", (0,))[0] // max(1, sps.get(k, 1)))
-                           for k, s in info.shapes.items()) * len(info.arrays) if decode else 0
+                           * len(chunked_arrays(info, k)) for k, s in info.shapes.items()
+                           if not _viewed(info, k)) if decode else 0
             t = bar.add_task("checking", total=len(info.files) + n_shards)
             advance = lambda n: bar.advance(t, n)  # noqa: E731
         check_files(root, info, report, advance)
         index = check_index(root, info, report)
         check_splits(root, info, index, report)
         check_arrays(root, info, index, report, decode, advance)
+        check_videos(root, info, report)  # episodes' RGB stored as video (verify_video.py)
     report.problems = _one_kind_line_per_file(report.problems)
     return report
 

@@ -21,9 +21,10 @@ from typing import Any
 import torch
 
 from vtsbench.errors import VtsError
-from vtsbench.recipes.base import Recipe
+from vtsbench.recipes.base import Recipe, WindowPredictor
 from vtsbench.recipes.checkpoints import checkpoint_meta
 from vtsbench.recipes.data import fit_view, iter_items, per_read, progress_iter, read_items
+from vtsbench.recipes.monitor import checkpoint_window, train_window_meta
 from vtsbench.transforms.crops import StaticCrops
 
 MODALITIES = ("rgb", "depth")
@@ -166,7 +167,7 @@ class ResnetRecipe(Recipe):
 
         cfg = TrainConfig.from_recipe(
             config, {"recipe": self.name, "recipe_config": json.dumps(config), "split": split,
-                   "objects": json.dumps(objects)})
+                     "objects": json.dumps(objects), **train_window_meta(ds.info, 1)})
         res = train_loop(model, loss_fn, data, out_dir, cfg, seed=seed, device=device,
                          resume=resume, progress=progress)
         n_cam = int(config["gradcam"] or 0)
@@ -176,6 +177,11 @@ class ResnetRecipe(Recipe):
         return res.checkpoint
 
     def _load(self, checkpoint: str | Path, device: str) -> tuple[Any, dict[str, Any], Any]:
+        model, config, dev, _ = self._load_meta(checkpoint, device)
+        return model, config, dev
+
+    def _load_meta(self, checkpoint: str | Path, device: str
+                   ) -> tuple[Any, dict[str, Any], Any, dict[str, Any]]:
         from vtsbench.training import load_checkpoint, resolve_device
 
         meta = checkpoint_meta(checkpoint, self.name, ("recipe_config", "objects"))
@@ -187,7 +193,7 @@ class ResnetRecipe(Recipe):
 
         deterministic(config.get("threads"))
         model.to(dev).eval()
-        return model, config, dev
+        return model, config, dev, meta
 
     def write_gradcam(self, checkpoint: str | Path, dataset_path: str | Path, split: str,
                       out: str | Path, n: int, part: str = "test", *,
@@ -222,15 +228,59 @@ class ResnetRecipe(Recipe):
         with torch.inference_mode():
             items = iter_items(data, per_read(view, data.arrays))
             for x, target in progress_iter(items, len(data), f"resnet ({part})", progress):
-                x = x.unsqueeze(0).to(dev)
                 t0 = time.perf_counter()
-                if tta:
-                    x = dihedral_views(x)
-                probs = model(_normalize(x, config)).softmax(-1).mean(0)
+                probs = class_probs(model, x.unsqueeze(0).to(dev), config, tta)
                 pred = int(probs.argmax())
                 self.latency_s.append(time.perf_counter() - t0)
                 rows.append({"sample_id": target["sample_id"], "task": "object", "pred": pred})
         return rows
+
+    def window_predictor(self, checkpoint: str | Path, device: str = "auto") -> WindowPredictor:
+        """The object probabilities of the newest frame of a window (one frame), prepared as
+        `predict` prepares a static sample (the contact crop, without contact masks: a live
+        stream has none, so the crop centres where the frame changes, as on an RGB-only
+        dataset). A depth checkpoint is refused: a live RGB stream has no depth."""
+        model, config, dev, meta = self._load_meta(checkpoint, device)
+        if config["modality"] != "rgb":
+            raise VtsError(f"the checkpoint reads {config['modality']}; a live stream gives "
+                           "RGB frames alone (train with modality rgb)", checkpoint)
+        frames, size = checkpoint_window(meta, checkpoint, 1)
+        tta = bool(config.get("tta", False))
+
+        def predict(window: Any) -> dict[str, Any]:
+            with torch.inference_mode():
+                x = frame_input(window[-1], config).unsqueeze(0).to(dev)
+                return {"object_probs": class_probs(model, x, config, tta).cpu().numpy()}
+
+        return WindowPredictor(predict, frames, size, {"object": tuple(meta["objects"])})
+
+
+def class_probs(model: Any, x: torch.Tensor, config: dict[str, Any], tta: bool
+                ) -> torch.Tensor:
+    """The class probabilities of one input (1, C, S, S), averaged over the 8 symmetries of
+    the square with `tta`: `predict`'s and the monitor's."""
+    if tta:
+        x = dihedral_views(x)
+    return model(_normalize(x, config)).softmax(-1).mean(0)
+
+
+def frame_input(rgb: Any, config: dict[str, Any]) -> torch.Tensor:
+    """(3, S, S) float32 in [0, 1] of one (H, W, 3) uint8 RGB frame, as `predict` reads a static
+    sample of an RGB dataset: its contact crop (`crop_px`, `StaticCrops`) or the whole frame
+    resized (`View.to_torch(dtype="float32")`)."""
+    import numpy as np
+
+    size = int(config["image_size"])
+    if config.get("crop_px"):
+        from vtsbench.transforms.contact_crop import contact_crop
+
+        x, _ = contact_crop({"rgb": rgb[None], "contact": None}, int(config["crop_px"]), size,
+                            "rgb")
+        return torch.from_numpy(np.ascontiguousarray(x[0]))
+    from vtsbench.dataset.read.torch_dataset import resize
+
+    t = resize(torch.from_numpy(np.ascontiguousarray(rgb)).movedim(-1, -3), (size, size))
+    return t.to(torch.float32).mul_(1.0 / 255.0)
 
 
 RECIPE = ResnetRecipe()

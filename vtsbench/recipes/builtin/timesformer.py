@@ -21,10 +21,11 @@ from pathlib import Path
 from typing import Any
 
 from vtsbench.errors import VtsError
-from vtsbench.labels import STATES
-from vtsbench.recipes.base import Recipe
+from vtsbench.labels import N_DIRECTIONS, STATES
+from vtsbench.recipes.base import Recipe, WindowPredictor
 from vtsbench.recipes.checkpoints import checkpoint_meta
 from vtsbench.recipes.data import fit_view, iter_items, per_read, progress_iter
+from vtsbench.recipes.monitor import checkpoint_window, train_window_meta
 from vtsbench.transforms.contact_crop import FLOW_SOFT_PX, FLOWS
 
 MODALITIES = ("rgb", "depth", "rgbd")
@@ -261,10 +262,27 @@ class TimesformerRecipe(Recipe):
                                      direction.to(dev), lam=lam)
 
         cfg = TrainConfig.from_recipe(
-            config, {"recipe": self.name, "recipe_config": json.dumps(config), "split": split})
+            config, {"recipe": self.name, "recipe_config": json.dumps(config), "split": split,
+                     **train_window_meta(view.dataset.info)})
         res = train_loop(model, loss_fn, data, out_dir, cfg, seed=seed, device=device,
                          resume=resume, progress=progress)
         return res.checkpoint
+
+    def _load(self, checkpoint: str | Path, device: str
+              ) -> tuple[Any, dict[str, Any], Any, dict[str, Any]]:
+        """The model with its weights on the device, its config, the device and the
+        checkpoint's metadata."""
+        from vtsbench.environment import deterministic
+        from vtsbench.training import load_checkpoint, resolve_device
+
+        meta = checkpoint_meta(checkpoint, self.name, ("recipe_config",))
+        config = meta["recipe_config"]
+        model = self._model(config, pretrained=False)
+        load_checkpoint(checkpoint, model)
+        dev = resolve_device(device)
+        deterministic(config.get("threads"))
+        model.to(dev).eval()
+        return model, config, dev, meta
 
     def predict(self, checkpoint: str | Path, dataset_path: str | Path, split: str,
                 part: str = "test", *, device: str = "auto",
@@ -272,38 +290,18 @@ class TimesformerRecipe(Recipe):
         import torch
 
         import vtsbench
-        from vtsbench.training import load_checkpoint, resolve_device
-
-        config = checkpoint_meta(checkpoint, self.name, ("recipe_config",))["recipe_config"]
-        model = self._model(config, pretrained=False)
-        load_checkpoint(checkpoint, model)
-        dev = resolve_device(device)
-        from vtsbench.environment import deterministic
         from vtsbench.transforms.crops import SequenceCrops
-        from vtsbench.transforms.symmetry import dihedral_average
 
-        deterministic(config.get("threads"))
-        model.to(dev).eval()
+        model, config, dev, _ = self._load(checkpoint, device)
         view = vtsbench.load(dataset_path).split(split, part)
         data = self._view_torch(view, model, config)
-        tta = bool(config.get("tta", False)) and bool(config.get("crop_px"))
-
-        def forward(x: Any) -> Any:
-            return model(_normalize(x, config))
-
         rows: list[dict[str, Any]] = []
         self.latency_s = []
         with torch.inference_mode():
             items = iter_items(data, per_read(view, data.arrays))
             for x, target in progress_iter(items, len(data), f"timesformer ({part})", progress):
                 t0 = time.perf_counter()
-                if tta:
-                    ps, pd = dihedral_average(forward, x.to(dev),
-                                              vector_channels(config, x.shape[1]))
-                else:
-                    state_logits, dir_logits = forward(x.unsqueeze(0).to(dev))
-                    ps, pd = state_logits[0], dir_logits[0]
-                ps, pd = ps.cpu(), pd.cpu()
+                ps, pd = slip_probs(model, x.to(dev), config)
                 # a latency from frames to labels: the crop and motion channels count too
                 sid = target["sample_id"]
                 prep = data.prep_s[sid] if isinstance(data, SequenceCrops) else 0.0
@@ -312,6 +310,73 @@ class TimesformerRecipe(Recipe):
                 rows.append({"sample_id": sid, "task": "direction", "pred": int(pd.argmax())})
         self.input_scale_xy = self._input_scale(view, data, int(model.config.image_size))
         return rows
+
+    def window_predictor(self, checkpoint: str | Path, device: str = "auto") -> WindowPredictor:
+        """State and direction probabilities of a window of RGB frames, prepared as `predict`
+        prepares a slip sample of an RGB dataset (contact crop and motion channels, the
+        model's frames evenly spaced; without contact masks, which a live stream does not
+        have: the crop centres where the frames change). A checkpoint that reads depth is
+        refused: a live RGB stream has none."""
+        import torch
+
+        model, config, dev, meta = self._load(checkpoint, device)
+        if config["modality"] != "rgb":
+            raise VtsError(f"the checkpoint reads {config['modality']}; a live stream gives "
+                           "RGB frames alone (train with modality rgb)", checkpoint)
+        frames, size = checkpoint_window(meta, checkpoint, int(model.config.num_frames))
+        side, keep = int(model.config.image_size), int(model.config.num_frames)
+        if keep > frames:
+            raise VtsError(f"corrupt checkpoint (the model reads {keep} frames of {frames})",
+                           checkpoint)
+
+        def predict(window: Any) -> dict[str, Any]:
+            with torch.inference_mode():
+                ps, pd = slip_probs(model, sequence_input(window, config, side, keep).to(dev),
+                                    config)
+            return {"state_probs": ps.numpy(), "direction_probs": pd.numpy()}
+
+        return WindowPredictor(predict, frames, size,
+                               {"state": tuple(STATES),
+                                "direction": tuple(str(k) for k in range(N_DIRECTIONS))})
+
+
+def slip_probs(model: Any, x: Any, config: dict[str, Any]) -> tuple[Any, Any]:
+    """(state, direction) probabilities on the CPU of one input sequence (T, C, S, S),
+    averaged over the 8 symmetries of the square crop when the config asks (`tta`, contact
+    crops only): `predict`'s and the monitor's."""
+    from vtsbench.transforms.symmetry import dihedral_average
+
+    def forward(batch: Any) -> Any:
+        return model(_normalize(batch, config))
+
+    if bool(config.get("tta", False)) and bool(config.get("crop_px")):
+        ps, pd = dihedral_average(forward, x, vector_channels(config, x.shape[1]))
+    else:
+        state_logits, dir_logits = forward(x.unsqueeze(0))
+        ps, pd = state_logits[0].softmax(-1), dir_logits[0].softmax(-1)
+    return ps.cpu(), pd.cpu()
+
+
+def sequence_input(rgb: Any, config: dict[str, Any], size: int, frames: int) -> Any:
+    """(frames, C, size, size) float32 of a (T, H, W, 3) uint8 RGB sequence, as `predict`
+    reads a slip sample of an RGB dataset: its contact crop with the motion channels
+    (`SequenceCrops`) or the frames resized (`View.to_torch(dtype="float32")`), `frames` of
+    them evenly spaced."""
+    import numpy as np
+    import torch
+
+    from vtsbench.dataset.read.torch_dataset import frame_numbers, resize
+
+    if config.get("crop_px"):
+        from vtsbench.transforms.contact_crop import contact_crop
+
+        x, _ = contact_crop({"rgb": rgb}, int(config["crop_px"]), size, "rgb",
+                            flow=flow_kind(config),
+                            soft_px=float(config.get("flow_soft_px") or FLOW_SOFT_PX),
+                            flow_mask=config.get("flow_mask") == "contact")
+        return torch.from_numpy(np.ascontiguousarray(x[frame_numbers(len(x), frames)]))
+    t = torch.from_numpy(np.ascontiguousarray(rgb[frame_numbers(len(rgb), frames)]))
+    return resize(t.movedim(-1, -3), (size, size)).to(torch.float32).mul_(1.0 / 255.0)
 
 
 RECIPE = TimesformerRecipe()

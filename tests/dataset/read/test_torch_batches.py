@@ -1,0 +1,114 @@
+"""Batches of View.to_torch and Windows.to_torch: a batch's frames are written once into its
+tensors (shared memory in a DataLoader worker) and default_collate hands those on, giving the
+very batches that stacking the items one by one gives, shuffled, with 0 and 2 workers."""
+
+from __future__ import annotations
+
+import math
+import pickle
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import vtsbench
+from tests.fixtures.episodes import takes, write_takes
+from vtsbench.dataset.read.loader import VtsDataset
+
+torch = pytest.importorskip("torch")
+from torch.utils.data import DataLoader, default_collate  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def ds(vts_dataset: Path) -> VtsDataset:
+    return vtsbench.load(vts_dataset)
+
+
+@pytest.fixture(scope="module")
+def eps(tmp_path_factory: pytest.TempPathFactory) -> VtsDataset:
+    return vtsbench.load(write_takes(tmp_path_factory.mktemp("eps") / "ds", takes(depth=True)))
+
+
+def _same(a: Any, b: Any, where: str = "batch") -> None:
+    """The same structure, types, dtypes, shapes, strides and values (NaN equal to NaN)."""
+    assert type(a) is type(b), (where, type(a), type(b))
+    if isinstance(a, torch.Tensor):
+        assert (a.dtype, a.shape, a.stride()) == (b.dtype, b.shape, b.stride()), where
+        torch.testing.assert_close(a, b, rtol=0, atol=0, equal_nan=True, msg=where)
+    elif isinstance(a, dict):
+        assert list(a) == list(b), where
+        for k in a:
+            _same(a[k], b[k], f"{where}.{k}")
+    elif isinstance(a, list | tuple):
+        assert len(a) == len(b), where
+        for k, (u, v) in enumerate(zip(a, b, strict=True)):
+            _same(u, v, f"{where}[{k}]")
+    else:
+        assert a == b or (isinstance(a, float) and math.isnan(a) and math.isnan(b)), where
+
+
+def _datasets(ds: VtsDataset, eps: VtsDataset) -> list[Any]:
+    wins = eps.episodes.windows(length=5, stride=2, pad="edge")
+    return [ds.slip.to_torch("rgbd", targets=("depth", "contact")),
+            ds.slip.to_torch("rgb", size=(20, 30), frames=3, targets=("contact",)),
+            ds.slip.to_torch("depth", targets=("depth",)),
+            ds.static.to_torch("rgbd", size=(30, 20)),
+            wins.to_torch("rgbd", targets=("depth", "contact")),
+            wins.to_torch("rgb", size=(12, 16))]
+
+
+def _x(batch: Any) -> torch.Tensor:
+    return batch[0]["rgb"] if isinstance(batch[0], dict) else batch[0]
+
+
+def test_collate_hands_on_the_batch_tensors(ds: VtsDataset, eps: VtsDataset) -> None:
+    """default_collate of one __getitems__ call: the tensors the frames were written into (no
+    second copy), equal to stacking the items; items are plain tuples to their users."""
+    for data in _datasets(ds, eps):
+        n = len(data)
+        items = data.__getitems__([3 % n, 0, n - 1, 3 % n, 1])
+        got, want = default_collate(items), default_collate([tuple(i) for i in items])
+        _same(got, want)
+        assert _x(got).untyped_storage().data_ptr() == _x(items[0]).untyped_storage().data_ptr()
+        assert isinstance(items[0], tuple) and type(data[1]) is tuple
+        assert type(pickle.loads(pickle.dumps(items[0]))) is tuple
+        _same(tuple(items[1]), data[0])
+        assert data.__getitems__([]) == []
+
+
+def test_other_lists_of_items_are_stacked(ds: VtsDataset) -> None:
+    """Items reordered, a part of a batch, or changed: collated as tuples, as before."""
+    data = ds.slip.to_torch("rgbd", targets=("depth",))
+    items = data.__getitems__([4, 1, 2])
+    for part in (items[::-1], items[:2]):
+        _same(default_collate(part), default_collate([tuple(i) for i in part]))
+    items[1][1]["depth"] = torch.zeros_like(items[1][1]["depth"])
+    items[2][0]["rgb"] = items[2][0]["rgb"].flip(-1)
+    got = default_collate(items)
+    _same(got, default_collate([tuple(i) for i in items]))
+    assert not got[1]["depth"][1].any() and torch.equal(got[0]["rgb"][2], items[2][0]["rgb"])
+    flips = ds.slip.to_torch("rgb", transforms=lambda s: s)  # transforms: plain tuples
+    assert all(type(i) is tuple for i in flips.__getitems__([0, 1]))
+
+
+def _probe(batch: list[Any]) -> tuple[Any, bool, bool]:
+    """default_collate in the worker, and whether the batch is the items' own shared tensor."""
+    out = default_collate(batch)
+    x = _x(out)
+    return out, x.is_shared(), x.untyped_storage().data_ptr() == \
+        _x(batch[0]).untyped_storage().data_ptr()
+
+
+@pytest.mark.parametrize("workers", [0, 2])
+def test_dataloader_batches_are_unchanged(ds: VtsDataset, eps: VtsDataset,
+                                          workers: int) -> None:
+    """Shuffled DataLoader batches with 0 and 2 workers: each equal to its items stacked by
+    default_collate; in a worker the frames are written into shared memory once."""
+    for data in _datasets(ds, eps):
+        order = np.random.default_rng(len(data)).permutation(len(data)).tolist()
+        loader = DataLoader(data, batch_size=3, sampler=order, num_workers=workers,
+                            collate_fn=_probe, timeout=120 if workers else 0)
+        for k, (batch, shared, same) in enumerate(loader):
+            assert same and shared == (workers > 0)
+            _same(batch, default_collate([data[i] for i in order[3 * k:3 * k + 3]]))
