@@ -3,6 +3,7 @@ and write the results page (docs/results.md).
 
 Run: .venv/bin/python benchmarks/results.py --dataset demo-data/dataset --runs demo-data/runs \
         [--leaderboards leaderboards] [--out docs/results.md] [--octopi DATASET] [--profile demo]
+        [--stream-seconds 15] [--streams FOLDER]
 
 Every step goes through the `vtsbench` command, as a user would run it (`train`, `predict`,
 `eval --out`, `leaderboard add`), so the page is also an end-to-end check of the commands:
@@ -21,7 +22,11 @@ Every step goes through the `vtsbench` command, as a user would run it (`train`,
 A run whose checkpoint exists is not trained again (`vtsbench train` resumes: finished runs
 cost nothing); `--retrain` starts them afresh. Latency is the median forward pass (flow: flow,
 features and tree) per sample with a batch of one, as `vtsbench predict` measures it, on this
-machine's CPU (and GPU when there is one). Prints the table and writes the page.
+machine's CPU (and GPU when there is one). Then every checkpoint in the live monitor, as
+`vtsbench stream --realtime` runs it, on --stream-seconds of its split's test part at 25 fps
+(frames per second sustained, dropped, p50/p95 latency); with --streams FOLDER, the detection
+delay and false alarms of the stream submissions `vtsbench eval` scored there. Prints the table
+and writes the page.
 
 The runs are declared in results_matrix.py, run by results_runner.py and written up by
 results_page.py; this script only reads the options and calls them in order.
@@ -53,18 +58,25 @@ from results_matrix import (  # noqa: E402, F401  (the matrix's names, read by t
 )
 from results_page import (  # noqa: E402, F401  (the page's names, read by tests)
     findings,
+    live_table,
     other_table,
     render,
+    stream_eval_table,
     summary_json,
     write_page,
 )
-from results_runner import (  # noqa: E402
+from results_runner import (  # noqa: E402, F401  (the runner's names, read by tests)
+    STREAM_SECONDS,
     complete_row,
+    live_rows,
+    live_stream,
     no_gpu,
     paper_size_latency,
     phase_reference,
+    read_stream_evals,
     run_all,
     run_cli,
+    stream_frames,
 )
 from slip_effects import slip_truth  # noqa: E402
 
@@ -95,9 +107,21 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--steps", type=int, default=None,
                     help="train every model run for this many steps instead of the profile's "
                          "(a smoke run of the whole path; the page says so)")
+    ap.add_argument("--stream-seconds", type=float, default=STREAM_SECONDS,
+                    help="seconds of 25 fps stream each checkpoint is played in the live "
+                         "monitor (its split's test part, back to back); 0: no live table")
+    ap.add_argument("--streams", type=Path, default=None,
+                    help="folder of `vtsbench eval` outputs of stream submissions "
+                         "(FOLDER/*/metrics.json): their detection-delay table")
     ap.add_argument("--summary", type=Path, default=None,
                     help="also write the rows as JSON here (accuracies, devices, versions)")
     return ap.parse_args()
+
+
+def shown_path(path: Path) -> str:
+    """A path as the page shows it: relative to the repository when inside it."""
+    full = path.resolve()
+    return os.path.relpath(full, ROOT) if full.is_relative_to(ROOT) else str(path)
 
 
 def main() -> None:
@@ -108,6 +132,10 @@ def main() -> None:
     import vtsbench
 
     t0 = time.perf_counter()
+    stream_evals = [] if args.streams is None else read_stream_evals(args.streams)
+    if args.streams is not None and not stream_evals:
+        sys.exit(f"{args.streams}: no metrics.json of a stream submission in its folders "
+                 "(FOLDER/*/metrics.json with a stream block, as `vtsbench eval` writes)")
     paths = {"synthetic": args.dataset, "octopi": args.octopi}
     gpu = torch.cuda.is_available()
     device = "cuda" if gpu else "cpu"
@@ -129,6 +157,10 @@ def main() -> None:
         paper_rows += paper_size_latency(dev, args.repeats)
     paper_rows = [p for p in paper_rows if p["device"] == "cpu"] + \
         [dict(p, name=f"{p['name']} on GPU") for p in paper_rows if p["device"] != "cpu"]
+    # after the runs and the paper models' latency, one stream at a time: the recipes pin
+    # torch's threads, which live_stream puts back
+    live, live_meta = live_rows(rows, paths, args.stream_seconds) if args.stream_seconds > 0 \
+        else ([], None)
     info_ds = vtsbench.load(args.dataset)
     h, w = info_ds.info.resolution
     counts = (f"{len(info_ds.static)} static frames and {len(info_ds.slip)} sequences of "
@@ -148,6 +180,10 @@ def main() -> None:
         + ("" if args.steps is None else f" Smoke run: every model trained for only "
            f"{args.steps} steps (--steps), so its figures say nothing of the recipe."),
         "other": None if args.other is None else json.loads(args.other.read_text()),
+        "live": live, "live_meta": live_meta,
+        "stream_seconds": None if args.stream_seconds == STREAM_SECONDS else args.stream_seconds,
+        "streams": None if args.streams is None else shown_path(args.streams),
+        "stream_evals": stream_evals,
     }
     elapsed = time.perf_counter() - t0
     page = render(rows, paper_rows, info, log, elapsed)

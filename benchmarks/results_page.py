@@ -1,7 +1,8 @@
 """The results page (docs/results.md) from the scored runs: the slip and static tables with
 the phase-correlation reference and the paper's rows, direction by slip distance and by what the
-simulator did to a sequence, state per true state, the same recipes on another dataset, and
-sentences comparing them."""
+simulator did to a sequence, state per true state, the same recipes on another dataset, what
+each checkpoint sustains on a live stream and, given a folder of stream evaluations, how fast
+each catches slip, and sentences comparing them."""
 
 from __future__ import annotations
 
@@ -43,7 +44,10 @@ def render(rows: list[dict[str, Any]], paper_rows: list[dict[str, Any]], info: d
         "```bash",
         f".venv/bin/python benchmarks/results.py --dataset {info['dataset']} "
         f"--runs {info['runs']} --profile {info['profile']}"
-        + (f" --octopi {info['octopi']}" if info.get("octopi") else ""),
+        + (f" --octopi {info['octopi']}" if info.get("octopi") else "")
+        + (f" --stream-seconds {info['stream_seconds']:g}"
+           if info.get("stream_seconds") is not None else "")
+        + (f" --streams {info['streams']}" if info.get("streams") else ""),
         "```",
         "",
         f"Machine: {info['machine']}. Devices: {info['devices']}. "
@@ -104,6 +108,8 @@ def render(rows: list[dict[str, Any]], paper_rows: list[dict[str, Any]], info: d
                              f"{_ms(p['latency_ms'])} | - | {PAPER[('static', mod)]['object']} "
                              "| - |")
     lines += other_table(info.get("other"))
+    lines += live_table(info.get("live", []), info.get("live_meta"))
+    lines += stream_eval_table(info.get("stream_evals", []), info.get("streams"))
     lines += ["", "## What the figures say", ""] + info["findings"] + [
         "", "## Where the figures are", "",
         f"- per run: `{info['runs']}/<dataset>-<method>-<split>/` (checkpoint, config), "
@@ -294,3 +300,97 @@ def summary_json(rows: list[dict[str, Any]], info: dict[str, Any], elapsed: floa
          "rows": [{k: v for k, v in r.items() if k not in ("run", "checkpoint")}
                   | {"method": r["run"].method, "split": r["run"].split}
                   for r in rows]}, indent=1, default=str) + "\n"
+
+
+def live_table(live: list[dict[str, Any]], meta: dict[str, Any] | None) -> list[str]:
+    """Every run's checkpoint in the live monitor on a stream at the camera's rate: latency
+    p50/p95, frames a second sustained and dropped; the checkpoints it refuses, and which
+    recipes keep up."""
+    if not live or not meta:
+        return []
+    fps = meta["fps"]
+    parts = []
+    for name, w in meta["streams"].items():
+        dataset, split = name.split("/", 1)
+        where = split if dataset == "synthetic" else f"{dataset} {split}"
+        unit = "test sequences" if w["kind"] == "slip" else "test frames, one a static sample"
+        parts.append(f"{where}: {w['frames']} frames, {w['samples']} of its {w['of']} {unit}")
+    size = "x".join(map(str, next(iter(meta["streams"].values()))["size"]))
+    ran = [r for r in live if "refused" not in r]
+    torch_threads = sorted({r["torch_threads"] for r in ran if r["recipe"] != "flow"})
+    cv_threads = sorted({r["opencv_threads"] for r in ran if r.get("opencv_threads")})
+    out = ["", "## Live stream: what each recipe sustains", "",
+           "Every checkpoint above in the live monitor (`vtsbench.recipes.monitor.Monitor`, run "
+           "as `vtsbench stream --realtime` runs it, on frames held in memory: no file read or "
+           f"written during the stream), fed at {fps:g} frames a second with its split's test "
+           f"part played back to back as one stream at {size} ({'; '.join(parts)}; evenly "
+           f"spaced over the part, {meta['seconds']:g} s of stream each). A frame that arrives "
+           "while the model is still busy replaces the waiting one and is dropped, as from a "
+           "camera. Latency: the monitor's `push` per call (window copy, prediction, "
+           "smoothing); frames/s sustained: frames it took per second of stream. One stream at "
+           "a time, after the runs, on this machine (load average "
+           f"{meta.get('load', '-')} as the streams began), with the threads `vtsbench stream` "
+           "gives it: torch's as each checkpoint's config pins them "
+           f"({', '.join(map(str, torch_threads)) or '-'}; the flow recipe uses no torch), "
+           f"OpenCV's {', '.join(map(str, cv_threads)) or '-'} (the DIS flow of flow-contact "
+           "and of the TimeSformer's motion channels).",
+           "", f"| method | split | calls | window frames | latency ms p50 | latency ms p95 | "
+           f"frames/s sustained (of {fps:g}) | dropped % |",
+           "|---|---|---|---:|---:|---:|---:|---:|"]
+    for r in ran:
+        share = 100 * r["dropped"] / r["frames"] if r["frames"] else None
+        out.append(f"| {r['method']} | {r['split']} | {r['calls_what']} | {r['window']} | "
+                   f"{_ms(r['latency_ms_p50'])} | {_ms(r['latency_ms_p95'])} | "
+                   f"{_ms(r['fps_sustained'])} | {_pct(share)} ({r['dropped']} of "
+                   f"{r['frames']}) |")
+    notes = [f"- Not streamed: {r['method']} ({r['split']}): {r['refused']}."
+             for r in live if "refused" in r]
+    if ran:
+        keep = [f"{r['method']} ({r['split']})" for r in ran if r["dropped"] == 0]
+        drop = [f"{r['method']} ({r['split']}) {_pct(100 * r['dropped'] / r['frames'])} %"
+                for r in ran if r["dropped"] and r["frames"]]
+        notes.append(f"- Keeps up with the {fps:g} fps stream (no frame dropped): "
+                     f"{', '.join(keep) or 'none'}"
+                     + (f"; drops frames: {', '.join(drop)}." if drop else "."))
+    return [*out, "", *notes]
+
+
+def stream_eval_table(evals: list[dict[str, Any]], folder: str | None) -> list[str]:
+    """The stream evaluations of a folder of `vtsbench eval` outputs (--streams): per stream
+    submission, detection delay, missed slips, false alarms, direction at detection, and the
+    speed its stream measured."""
+    if not evals:
+        return []
+    sets = []
+    for e in evals:
+        d = e["dataset"]
+        text = (f"`{d['name']}` {d['dataset_version']} (dataset_sha256 "
+                f"`{d['dataset_sha256'][:16]}...`), {e['split']} / {e['part']}")
+        if text not in sets:
+            sets.append(text)
+    out = ["", "## Slip caught on a stream: detection delay and false alarms", "",
+           f"`vtsbench eval` of the stream submissions in `{folder}` ({len(evals)}; "
+           f"{'; '.join(sets)}): delay from slip onset to the first correct slip call (median "
+           "and 90th percentile over the slips caught; 95 % bootstrap interval over episodes), "
+           "slips never called, false alarms per minute of static and press, the direction of "
+           "the first slip call; frames/s and p95 latency as the submission's own stream "
+           "measured them (not re-measured here).", "",
+           "| method | debounce | episodes (with slip) | delay ms p50 [95 % interval] | delay ms "
+           "p90 | missed % | false alarms / min | direction at detection % | frames/s "
+           "sustained | latency ms p95 |", "|---|---:|---:|---|---:|---:|---:|---:|---:|---:|"]
+    def share(v: float | None) -> str:
+        return _pct(None if v is None else 100 * v)
+
+    def whole(v: float | None) -> str:
+        return "-" if v is None else f"{v:.0f}"
+
+    for e in evals:
+        ci = e.get("delay_ms_p50_ci95") or (None, None)
+        p50 = whole(e["delay_ms_p50"]) + ("" if None in ci else f" [{ci[0]:.0f}, {ci[1]:.0f}]")
+        fa = e["false_alarms_per_min"]
+        out.append(f"| {e['method']} | {e['smoothing']} | {e['n_episodes']} "
+                   f"({e['n_slip_episodes']}) | {p50} | {whole(e['delay_ms_p90'])} | "
+                   f"{share(e['missed'])} | {'-' if fa is None else f'{fa:.1f}'} | "
+                   f"{share(e['direction_accuracy'])} | {_ms(e['fps_sustained'])} | "
+                   f"{_ms(e['latency_ms_p95'])} |")
+    return out

@@ -1,8 +1,9 @@
 """Running the results page's matrix: every step through the `vtsbench` command as a user runs
 it (train, predict, eval, leaderboard add), resumable (a finished run is not trained again, a
 submission newer than its checkpoint and already scored is reused), several runs side by side;
-and the page's measurements beside the runs: the phase-correlation reference, parameter counts
-and the paper-size models' latency."""
+and the page's measurements beside the runs: the phase-correlation reference, parameter counts,
+the paper-size models' latency, every checkpoint in the live monitor on a 25 fps stream, and the
+stream evaluations of a folder of `vtsbench eval` outputs."""
 
 from __future__ import annotations
 
@@ -273,3 +274,127 @@ def no_gpu() -> bool:
     """True when no CUDA device is visible (checked without importing torch)."""
     return not (os.environ.get("CUDA_VISIBLE_DEVICES", "x") != "" and
                 (shutil.which("nvidia-smi") or Path("/dev/nvidia0").exists()))
+
+
+#: The live stream every recipe is played: frames a second, as a GelSight Mini camera gives,
+#: and the seconds of it each checkpoint gets by default (--stream-seconds).
+STREAM_FPS, STREAM_SECONDS = 25.0, 15.0
+
+
+def stream_frames(dataset: Path, split: str, n: int) -> tuple[Any, dict[str, Any]]:
+    """About n frames of the split's test part played back to back as one stream at the
+    dataset's resolution, and what they are: whole test sequences evenly spaced over the part
+    (in its order, so every state is in it), or a static split's test frames one a sample."""
+    import numpy as np
+
+    import vtsbench
+
+    ds = vtsbench.load(dataset)
+    view = ds.split(split, "test")
+    per = ds.info.frames_per_sequence if view.kind == "slip" else 1
+    k = min(len(view), max(1, -(-n // per)))
+    pos = np.unique(np.linspace(0, len(view) - 1, k).round().astype(int))
+    rgb = view.read(pos, ("rgb",))["rgb"]
+    frames = np.ascontiguousarray(rgb.reshape(-1, *rgb.shape[-3:]))
+    return frames, {"kind": view.kind, "samples": len(pos), "of": len(view),
+                    "frames": len(frames), "size": list(frames.shape[1:3])}
+
+
+def live_stream(recipe: str, checkpoint: str, frames: Any, fps: float = STREAM_FPS
+                ) -> dict[str, Any]:
+    """The recipe's live monitor on the frames fed at fps from memory, as `vtsbench stream
+    --realtime` plays a file (a frame the model is too slow for is dropped, as from a camera;
+    each call's JSON line made and thrown away): its summary (fps sustained, dropped, latency
+    p50/p95), window, what it calls and the torch and OpenCV threads it ran on; a checkpoint the
+    monitor refuses: the reason. Torch's threads and deterministic mode are put back afterwards."""
+    import torch
+
+    from vtsbench.errors import VtsError
+    from vtsbench.recipes.monitor import Monitor
+    from vtsbench.recipes.stream import LineWriter, Source, run_stream
+
+    class Discard:
+        def write(self, data: bytes) -> None:
+            pass
+
+        def flush(self) -> None:
+            pass
+
+    def gen() -> Any:
+        for k, f in enumerate(frames):
+            yield k, k / fps, f
+
+    threads, strict = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
+    try:
+        monitor = Monitor.from_checkpoint(recipe, checkpoint, device="cpu")
+        for f in frames[:monitor.frames]:  # warm up: the first torch call, OpenCV's first DIS
+            monitor.push(f)
+        monitor.reset()
+        import cv2
+
+        used, cv_used = torch.get_num_threads(), cv2.getNumThreads()
+        summary = run_stream(monitor, Source("video", "results page stream", fps, gen),
+                             LineWriter(Discard()), realtime=True, device="cpu")
+        classes = monitor.describe()["classes"]
+        calls = "object" if "object" in classes else "state, direction"
+        return {**{k: summary[k] for k in ("frames", "processed", "dropped", "calls",
+                                           "wall_s", "fps_sustained", "latency_ms_p50",
+                                           "latency_ms_p95")},
+                "window": monitor.frames, "calls_what": calls, "torch_threads": used,
+                "opencv_threads": cv_used}
+    except VtsError as e:  # a checkpoint the monitor cannot run (depth), a stream too short
+        return {"refused": e.reason}
+    finally:
+        torch.set_num_threads(threads)
+        torch.use_deterministic_algorithms(strict)
+
+
+def live_rows(rows: list[dict[str, Any]], paths: dict[str, Path | None], seconds: float
+              ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """Every run's checkpoint in the live monitor, one after the other, each on `seconds` of
+    its split's test part at STREAM_FPS (`stream_frames`, `live_stream`); and what the streams
+    were and the load average as they began (for the page's sentence)."""
+    n = max(1, round(seconds * STREAM_FPS))
+    load = round(os.getloadavg()[0], 1)  # what else the 2 cores carry moves these figures
+    cache: dict[tuple[str, str], tuple[Any, dict[str, Any]]] = {}
+    out = []
+    for r in rows:
+        run = r["run"]
+        key = (run.dataset, run.split)
+        if key not in cache:
+            cache[key] = stream_frames(paths[run.dataset], run.split, n)
+        frames, what = cache[key]
+        print(f"live stream: {run.method} ({run.split}), {len(frames)} frames at "
+              f"{STREAM_FPS:g} fps", flush=True)
+        out.append({"method": run.method, "recipe": run.recipe, "split": run.split,
+                    "dataset": run.dataset, "stream": what,
+                    **live_stream(run.recipe, r["checkpoint"], frames)})
+    return out, {"fps": STREAM_FPS, "seconds": seconds, "load": load,
+                 "streams": {
+        f"{d}/{s}": what for (d, s), (_, what) in cache.items()}}
+
+
+def read_stream_evals(folder: Path) -> list[dict[str, Any]]:
+    """The stream scores of every `vtsbench eval` output in folder (FOLDER/*/metrics.json
+    with a `stream` block, in name order): method, decision rule, dataset and figures."""
+    from vtsbench.evaluation.stream_result import method_name
+
+    out = []
+    for path in sorted(folder.glob("*/metrics.json")):
+        result = read_metrics(path)
+        sr = result.stream
+        if sr is None:
+            continue
+        out.append({"folder": path.parent.name,
+                    "method": result.submission.method or method_name(sr),
+                    "recipe": sr.recipe, "smoothing": sr.smoothing, "window": sr.window,
+                    "dataset": result.dataset.to_dict(), "split": result.split,
+                    "part": result.part, "n_episodes": sr.n_episodes,
+                    "n_slip_episodes": sr.n_slip_episodes, "detected": sr.detected,
+                    "delay_ms_p50": sr.delay_ms_p50, "delay_ms_p50_ci95": sr.delay_ms_p50_ci95,
+                    "delay_ms_p90": sr.delay_ms_p90, "missed": sr.missed,
+                    "false_alarms_per_min": sr.false_alarms_per_min,
+                    "false_alarms": sr.false_alarms, "non_slip_minutes": sr.non_slip_minutes,
+                    "direction_accuracy": sr.direction_accuracy,
+                    "fps_sustained": sr.fps_sustained, "latency_ms_p95": sr.latency_ms_p95})
+    return out

@@ -73,11 +73,8 @@ def add(submission: str | Path, dataset: str | Path | VtsDataset, split: str, pa
         return _add_stream(submission, dataset, split, part, Path(root), replace)
     result, sub, truth = evaluate_submission(submission, dataset, split, part, meta=meta)
     assert sub is not None and truth is not None
-    folder = Path(root) / _slug(truth.dataset) / split
-    eid = f"{_slug(str(sub.meta['method']))}-{sub.sha256[:8]}"
-    path = folder / f"{eid}.json"
-    if path.exists() and not replace:
-        raise VtsError("this submission is already on the leaderboard (use --overwrite)", path)
+    eid, path = _entry_path(Path(root), truth.dataset, split, str(sub.meta["method"]),
+                            sub.sha256, replace)
     entry = {
         "entry_version": ENTRY_VERSION, "id": eid,
         "added": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
@@ -89,9 +86,20 @@ def add(submission: str | Path, dataset: str | Path | VtsDataset, split: str, pa
         "predictions": {"sample_ids": truth.ids, "tasks": {
             t: {str(s): a.tolist() for s, a in by.items()} for t, by in sub.preds.items()}},
     }
-    folder.mkdir(parents=True, exist_ok=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
     write_text_atomic(path, json.dumps(entry, indent=1, allow_nan=False) + "\n")
     return path
+
+
+def _entry_path(root: Path, dataset: str, split: str, method: str, sha256: str,
+                replace: bool) -> tuple[str, Path]:
+    """An entry's id and file: `<root>/<dataset>/<split>/<method>-<sha8>.json`; one that exists
+    is refused unless replace."""
+    eid = f"{_slug(method)}-{sha256[:8]}"
+    path = root / _slug(dataset) / split / f"{eid}.json"
+    if path.exists() and not replace:
+        raise VtsError("this submission is already on the leaderboard (use --overwrite)", path)
+    return eid, path
 
 
 def _add_stream(submission: str | Path, dataset: str | Path | VtsDataset, split: str, part: str,
@@ -105,11 +113,8 @@ def _add_stream(submission: str | Path, dataset: str | Path | VtsDataset, split:
     sr = result.stream
     assert sr is not None
     method = result.submission.method or sr.recipe
-    folder = root / _slug(result.dataset.name) / split
-    eid = f"{_slug(method)}-{result.submission.sha256[:8]}"
-    path = folder / f"{eid}.json"
-    if path.exists() and not replace:
-        raise VtsError("this submission is already on the leaderboard (use --overwrite)", path)
+    eid, path = _entry_path(root, result.dataset.name, split, method, result.submission.sha256,
+                            replace)
     entry = {
         "entry_version": ENTRY_VERSION, "id": eid,
         "added": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
@@ -118,7 +123,7 @@ def _add_stream(submission: str | Path, dataset: str | Path | VtsDataset, split:
         "split": split, "part": part, "metric_version": result.metric_version,
         "vtsbench_version": result.vtsbench_version, "metrics": {}, "rescored_from": [],
         "predictions": {"sample_ids": [], "tasks": {}}, "stream": sr.to_dict()}
-    folder.mkdir(parents=True, exist_ok=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
     write_text_atomic(path, json.dumps(entry, indent=1, allow_nan=False) + "\n")
     return path
 

@@ -17,6 +17,7 @@ import pytest
 import vtsbench
 from tests.fixtures.cli import clean, run
 from tests.fixtures.datasets import SHARD_MB, tree_bytes
+from tests.fixtures.faults import Crash, FailingOs
 from vtsbench import atomic
 from vtsbench.dataset.build import BuildOptions, build
 from vtsbench.dataset.build.staging import partial_path
@@ -90,24 +91,6 @@ def test_two_workers_give_the_same_bytes(episodes_built: Path, sim_recordings: P
     assert tree_bytes(out) == tree_bytes(episodes_built)
 
 
-class Crash(Exception):
-    """The injected fault."""
-
-
-class FailingOs:
-    """os as vtsbench.atomic sees it, whose replace fails at call `at` (from 1; never at 0)."""
-
-    def __init__(self, at: int) -> None:
-        self.at, self.calls = at, 0
-
-    def replace(self, src: Any, dst: Any) -> None:
-        self.calls += 1
-        if self.calls == self.at:
-            raise Crash(f"replace #{self.calls}: {dst}")
-        os.replace(src, dst)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(os, name)
 
 
 def test_a_failure_at_every_write_and_rename_then_resume(make_recordings, tmp_path: Path,

@@ -10,7 +10,6 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -18,30 +17,10 @@ import vtsbench
 from tests.fixtures.data import ROOT
 from tests.fixtures.datasets import tree_bytes
 from tests.fixtures.episodes import FPS, SHARD_MB, takes, write_takes
+from tests.fixtures.faults import Crash, FailingOs
 from vtsbench import atomic
 from vtsbench.dataset.build.staging import partial_path
 from vtsbench.errors import VtsError
-
-
-class Crash(Exception):
-    """The injected fault."""
-
-
-class FailingOs:
-    """The os module as vtsbench.atomic sees it, whose replace (every atomic write's rename and
-    every folder rename) fails at call `at` (counting from 1; never when at is 0)."""
-
-    def __init__(self, at: int) -> None:
-        self.at, self.calls = at, 0
-
-    def replace(self, src: Any, dst: Any) -> None:
-        self.calls += 1
-        if self.calls == self.at:
-            raise Crash(f"replace #{self.calls}: {dst}")
-        os.replace(src, dst)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(os, name)
 
 
 @pytest.fixture(scope="module")

@@ -21,6 +21,7 @@ import vtsbench
 from tests.fixtures.data import ROOT
 from tests.fixtures.datasets import tree_bytes
 from tests.fixtures.episodes import FPS, SHARD_MB, takes
+from tests.fixtures.faults import Crash, FailingOs
 from vtsbench import atomic
 from vtsbench.dataset.build.staging import partial_path
 from vtsbench.dataset.format.records import SplitFile
@@ -202,24 +203,6 @@ def test_a_split_whose_parts_share_frames_is_refused_and_a_scheme_skipped(tmp_pa
     assert verify(tmp_path / "ds").ok
 
 
-class Crash(Exception):
-    """The injected fault."""
-
-
-class FailingOs:
-    """os as vtsbench.atomic sees it, whose replace fails at call `at` (from 1; never at 0)."""
-
-    def __init__(self, at: int) -> None:
-        self.at, self.calls = at, 0
-
-    def replace(self, src: Any, dst: Any) -> None:
-        self.calls += 1
-        if self.calls == self.at:
-            raise Crash(f"replace #{self.calls}: {dst}")
-        os.replace(src, dst)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(os, name)
 
 
 def test_a_failure_at_every_write_and_rename_then_resume(views: Path, tmp_path: Path,

@@ -15,6 +15,7 @@ import pytest
 import vtsbench
 from tests.fixtures.datasets import tree_bytes
 from tests.fixtures.episode_video import FPS, SHARD_MB, video_takes, write_video_takes
+from tests.fixtures.faults import Crash, FailingOs
 from vtsbench import atomic
 from vtsbench.dataset.build.staging import partial_path
 from vtsbench.dataset.format.info import info_schema_errors
@@ -23,27 +24,6 @@ from vtsbench.dataset.format.video import CODECS
 from vtsbench.dataset.read.video import probe
 from vtsbench.dataset.tools.verify import verify
 from vtsbench.errors import VtsError
-
-
-class Crash(Exception):
-    """The injected fault."""
-
-
-class FailingOs:
-    """The os module as vtsbench.atomic sees it, whose replace (every atomic write's rename, a
-    video's included) fails at call `at` (from 1; never when at is 0)."""
-
-    def __init__(self, at: int) -> None:
-        self.at, self.calls = at, 0
-
-    def replace(self, src: Any, dst: Any) -> None:
-        self.calls += 1
-        if self.calls == self.at:
-            raise Crash(f"replace #{self.calls}: {dst}")
-        os.replace(src, dst)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(os, name)
 
 
 @pytest.fixture(scope="module")
