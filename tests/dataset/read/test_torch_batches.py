@@ -112,3 +112,17 @@ def test_dataloader_batches_are_unchanged(ds: VtsDataset, eps: VtsDataset,
         for k, (batch, shared, same) in enumerate(loader):
             assert same and shared == (workers > 0)
             _same(batch, default_collate([data[i] for i in order[3 * k:3 * k + 3]]))
+
+
+def test_shared_batch_memory_is_prefaulted_unchanged() -> None:
+    """A worker's batch tensor is in shared memory and writable; prefaulting memory already
+    written (an unaligned start, part of a page) leaves its bytes as they were."""
+    from vtsbench.dataset.read.torch_batch import empty, prefault
+
+    t = empty((3, 5, 700), np.uint8, True)
+    assert t.is_shared() and t.shape == (3, 5, 700)
+    want = np.arange(t.numel(), dtype=np.int64).astype(np.uint8).reshape(t.shape)
+    t.numpy()[:] = want
+    prefault(t.data_ptr() + 3, 5000)
+    prefault(t.data_ptr(), 0)
+    assert np.array_equal(t.numpy(), want)

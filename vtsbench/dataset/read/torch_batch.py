@@ -9,6 +9,7 @@ stacking its items would give, bit for bit. This module imports torch.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -48,14 +49,46 @@ def put_frames(name: str, src: np.ndarray, dst: np.ndarray) -> None:
 
 def empty(shape: tuple[int, ...], dtype: np.dtype, shared: bool) -> torch.Tensor:
     """An uninitialised tensor. `shared`: in shared memory, as default_collate makes a worker's
-    batch, so that the DataLoader sends it to the main process without a copy; else numpy's
-    memory, which asks the kernel for huge pages (a fresh 39 MB buffer filled in 5 ms, against
-    22 ms in torch.empty's 4 KB pages)."""
+    batch, so that the DataLoader sends it to the main process without a copy, its pages
+    faulted in by one call (`prefault`); else numpy's memory, which asks the kernel for huge
+    pages (a fresh 39 MB buffer filled in 5 ms, against 22 ms in torch.empty's 4 KB pages)."""
     if not shared:
         return torch.from_numpy(np.empty(shape, dtype))
     nbytes = math.prod(shape) * np.dtype(dtype).itemsize
     t = torch.from_numpy(np.empty(0, dtype))
-    return t.set_(torch.UntypedStorage._new_shared(nbytes), 0, shape)
+    t.set_(torch.UntypedStorage._new_shared(nbytes), 0, shape)
+    prefault(t.data_ptr(), nbytes)
+    return t
+
+
+_MADV_POPULATE_WRITE = 23  # Linux 5.14+
+
+
+@functools.cache
+def _madvise() -> Any:
+    """libc's madvise, or None where there is none (not Linux)."""
+    import ctypes
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        return ctypes.CDLL(None, use_errno=True).madvise
+    except (OSError, AttributeError):
+        return None
+
+
+def prefault(ptr: int, nbytes: int) -> None:
+    """Fault in a fresh mapping's pages in one call (MADV_POPULATE_WRITE) rather than one
+    fault per 4 KB page as the frames are written: the shared memory of a worker's batch is
+    new for every batch. Best effort: an older kernel refuses it and the writes fault in."""
+    madvise = _madvise()
+    if madvise is None or nbytes == 0:
+        return
+    import ctypes
+
+    start = ptr - ptr % 4096
+    madvise(ctypes.c_void_p(start), ctypes.c_size_t(nbytes + ptr - start), _MADV_POPULATE_WRITE)
 
 
 def in_worker() -> bool:
