@@ -4,45 +4,33 @@ write or rename that resumes to the bytes of a run in one go."""
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import os
 from pathlib import Path
-from typing import Any
 
 import pytest
 from typer.testing import CliRunner
 
 import vtsbench
 from tests.fixtures.datasets import tree_bytes
+from tests.fixtures.faults import Crash, FailingOs
 from vtsbench import atomic
 from vtsbench.cli import app
+from vtsbench.cli.episodes import simulate_episodes as command
 from vtsbench.dataset.build.staging import partial_path
 from vtsbench.errors import VtsError
-from vtsbench.sim.episode_dataset import EpisodeOptions, simulate_episodes
+from vtsbench.sim.episode_dataset import (
+    MAX_SAMPLE_STRIDE,
+    SAMPLE_STRIDE,
+    EpisodeOptions,
+    simulate_episodes,
+)
 
 ARGS = ["--episodes", "8", "--objects", "2", "--sessions", "2", "--fps", "25", "--seconds", "3",
         "--size", "48x64", "--quiet"]
 OPTS = EpisodeOptions(8, 2, 2, 25.0, 3.0, (48, 64), 0)
 
 
-class Crash(Exception):
-    """The injected fault."""
-
-
-class FailingOs:
-    """The os module as vtsbench.atomic sees it, whose replace fails at call `at` (from 1;
-    never when at is 0)."""
-
-    def __init__(self, at: int) -> None:
-        self.at, self.calls = at, 0
-
-    def replace(self, src: Any, dst: Any) -> None:
-        self.calls += 1
-        if self.calls == self.at:
-            raise Crash(f"replace #{self.calls}: {dst}")
-        os.replace(src, dst)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(os, name)
 
 
 @pytest.fixture(scope="module")
@@ -71,16 +59,20 @@ def test_the_command_writes_takes_and_samples(reference: tuple[Path, int]) -> No
 
 def test_sample_stride(reference: tuple[Path, int], tmp_path: Path) -> None:
     out = tmp_path / "dense"
-    res = CliRunner().invoke(app, ["simulate-episodes", str(out), *ARGS, "--sample-stride", "4"])
+    res = CliRunner().invoke(app, ["simulate-episodes", str(out), *ARGS, "--sample-stride", "2"])
     assert res.exit_code == 0, res.output
     starts = {v: [int(s[-6:]) for s in vtsbench.load(p).view("slip").index.column(
         "sample_id").to_pylist()] for v, p in (("dense", out), ("default", reference[0]))}
-    assert all(a % 8 == 0 for a in starts["default"])
-    assert all(a % 4 == 0 for a in starts["dense"]) and any(a % 8 for a in starts["dense"])
+    assert all(a % SAMPLE_STRIDE == 0 for a in starts["default"])
+    assert all(a % 2 == 0 for a in starts["dense"]) and any(a % 4 for a in starts["dense"])
     # the takes are the same; the stride is in the options a resume must match
     assert (vtsbench.load(out).episodes[0]["rgb"] == vtsbench.load(reference[0]).episodes[0]
             ["rgb"]).all()
-    assert dataclasses.replace(OPTS, sample_stride=4).key() != OPTS.key()
+    assert dataclasses.replace(OPTS, sample_stride=2).key() != OPTS.key()
+    # the command's default and bound are the library's
+    param = inspect.signature(command, eval_str=True).parameters["sample_stride"]
+    assert param.default == SAMPLE_STRIDE
+    assert param.annotation.__metadata__[0].max == MAX_SAMPLE_STRIDE
 
 
 def test_killed_at_any_rename_then_resumed(reference: tuple[Path, int], tmp_path: Path,

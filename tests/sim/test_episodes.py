@@ -150,12 +150,12 @@ def test_a_dataset_of_takes(tmp_path: Path) -> None:
     # an existing dataset is refused in one line
     with pytest.raises(VtsError, match=r"exists|already"):
         simulate_episodes(out, opts)
-    # overlapping windows (stride 2): the same takes and held-out objects, the slip splits
+    # denser windows (stride 2, the default 4): the same takes and held-out objects, the slip splits
     # still written (whole takes in val), more samples
     dense = tmp_path / "dense"
     simulate_episodes(dense, dataclasses.replace(opts, sample_stride=2), workers=1)
     dd = vtsbench.load(dense)
-    assert "unseen_objects" in dd.splits and len(dd.view("slip")) > 3 * len(slip)
+    assert "unseen_objects" in dd.splits and len(dd.view("slip")) > 1.5 * len(slip)
     assert (dd.episodes[0]["rgb"] == first["rgb"]).all()
     assert json.loads((dense / "meta" / "splits" / "unseen_objects.json").read_text())[
         "params"]["held_out_objects"] == held[0]

@@ -39,9 +39,9 @@ def simulate_episodes(
         help="Share of the takes without slip (hold, press and release only).")] = 0.25,
     sample_stride: Annotated[int, typer.Option(
         min=1, max=64, help=(
-            "Frames between the starts of two 8-frame slip samples in a take (below 8 the "
-            "windows overlap: more of them, near-onset ones included).")
-    )] = 8,
+            "Frames between the starts of two 8-frame slip samples in a take (below 8 they "
+            "overlap: more windows, near-onset ones included).")
+    )] = 4,
     truth: Annotated[bool, typer.Option(
         "--truth", help="Store the simulator's depth and contact per frame too.")] = False,
     gel: Annotated[Literal["markers", "plain"] | None, choice(

@@ -294,3 +294,15 @@ def test_unseen_objects_val_of_one_sample_takes_is_unchanged(samples) -> None:
     assert a.parts == b.parts
     assert sp.schemes.take_of("a/b[c].avi[3:11]") == "a/b[c].avi"
     assert sp.schemes.take_of("rec/s1.png") == "rec/s1.png"
+
+
+def test_unseen_objects_val_leaves_a_take_to_train_and_sources_may_be_empty(samples) -> None:
+    """A seen set of one take keeps it in train; samples without a source are takes of their
+    own (the episode splits' records)."""
+    one_take = [dataclasses.replace(s, source=f"rec/all.avi[{8 * i}:{8 * i + 8}]")
+                for i, s in enumerate(samples)]
+    split = sp.unseen_objects_split(one_take, seed=5)
+    assert split.parts["train"] and "val" not in split.parts
+    blank = [dataclasses.replace(s, source="") for s in samples]
+    assert sp.unseen_objects_split(blank, seed=5).parts == sp.unseen_objects_split(
+        samples, seed=5).parts

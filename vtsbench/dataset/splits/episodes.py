@@ -45,9 +45,9 @@ def split_table(episodes: pa.Table) -> pa.Table:
 
 def _metas(episodes: pa.Table, kind: str) -> list[SampleMeta]:
     """One record per episode, of the kind a scheme's maker takes (no state: an episode has
-    many)."""
+    many; its source is its own id: every episode a take of its own)."""
     ids, objs, sess = (episodes.column(c).to_pylist() for c in ("episode_id", "object", "session"))
-    return [SampleMeta(i, kind, r, o, 0, s, "", None, None, "") for r, (i, o, s)
+    return [SampleMeta(i, kind, r, o, 0, s, "", None, None, i) for r, (i, o, s)
             in enumerate(zip(ids, objs, sess, strict=True))]
 
 

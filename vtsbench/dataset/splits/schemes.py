@@ -183,14 +183,15 @@ def _take_takes(samples: list[SampleMeta], fraction: float, rng: np.random.Gener
     exactly `_take` over the sample ids (the splits of such datasets keep their bytes)."""
     ids = [s.sample_id for s in samples]
     groups: dict[str, list[str]] = {}
-    for s in samples:
-        groups.setdefault(take_of(s.source), []).append(s.sample_id)
+    for s in samples:  # a sample of no source is a take of its own
+        groups.setdefault(take_of(s.source) if s.source else f"\0{s.sample_id}",
+                          []).append(s.sample_id)
     if all(len(g) == 1 for g in groups.values()):
         return _take(ids, fraction, rng)
     takes = sorted(groups)
     want = math.floor(fraction * len(ids) + 0.5)
     picked: list[str] = []
-    for i in rng.permutation(len(takes)):
+    for i in rng.permutation(len(takes))[:len(takes) - 1]:  # one take at least left to train
         if len(picked) >= want:
             break
         picked += groups[takes[i]]
