@@ -27,22 +27,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-
-def _cpu() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
+from machine import cpu_model  # benchmarks/machine.py: the shared machine line
 
 
 def shift_px(window: np.ndarray) -> tuple[float, float]:
@@ -335,7 +325,7 @@ def main() -> None:
     directions = direction_study(ds, split, detections)
     times["direction study"] = time.perf_counter() - t0
     load = os.getloadavg()
-    doc = {"machine": f"{os.cpu_count()} cores, {_cpu()}", "load_average": load,
+    doc = {"machine": f"{os.cpu_count()} cores, {cpu_model()}", "load_average": load,
            "sample_stride": stride, "train_samples": len(train_ids),
            "threshold_px": threshold, "threshold_balanced_accuracy": bal,
            "held_out_objects": held[split], "seconds": times, "rows": rows,

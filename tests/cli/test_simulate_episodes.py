@@ -31,8 +31,6 @@ ARGS = ["--episodes", "8", "--objects", "2", "--sessions", "2", "--fps", "25", "
 OPTS = EpisodeOptions(8, 2, 2, 25.0, 3.0, (48, 64), 0)
 
 
-
-
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int]:
     """The command's dataset written in one go, and how many renames it took."""

@@ -91,8 +91,6 @@ def test_two_workers_give_the_same_bytes(episodes_built: Path, sim_recordings: P
     assert tree_bytes(out) == tree_bytes(episodes_built)
 
 
-
-
 def test_a_failure_at_every_write_and_rename_then_resume(make_recordings, tmp_path: Path,
                                                          monkeypatch: pytest.MonkeyPatch
                                                          ) -> None:

@@ -203,8 +203,6 @@ def test_a_split_whose_parts_share_frames_is_refused_and_a_scheme_skipped(tmp_pa
     assert verify(tmp_path / "ds").ok
 
 
-
-
 def test_a_failure_at_every_write_and_rename_then_resume(views: Path, tmp_path: Path,
                                                          monkeypatch: pytest.MonkeyPatch
                                                          ) -> None:
