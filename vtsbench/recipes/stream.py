@@ -15,6 +15,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -83,12 +84,13 @@ def video_source(path: str | Path) -> Source:
     return Source("video", cap.name, cap.fps, frames, close=cap.close)
 
 
-def episode_source(dataset: str | Path, episode_id: str) -> Source:
-    """One episode of a dataset (`ds.episodes`): its frames in batched reads, with their
-    timestamps and the episode's row (slip onset, object) for the header."""
+def episode_source(dataset: str | Path, episode_id: str, ds: Any = None) -> Source:
+    """One episode of a dataset (`ds.episodes`; `ds`: the dataset already loaded from
+    `dataset`, or None to load it): its frames in batched reads, with their timestamps and the
+    episode's row (slip onset, object) for the header."""
     import vtsbench
 
-    eps = vtsbench.load(dataset).episodes
+    eps = (vtsbench.load(dataset) if ds is None else ds).episodes
     one = eps.where(episode_id=episode_id)
     if len(one) != 1:
         ids = eps.ids
@@ -223,35 +225,33 @@ class LineWriter:
         self.out.flush()
 
 
-def line_errors(doc: Any) -> list[str]:
-    """Every violation of schemas/stream.schema.json by one line's object, one line each."""
+@lru_cache(maxsize=1)
+def _line_validator() -> Any:
+    """The validator of schemas/stream.schema.json, read once (a submission checks every
+    line with it)."""
     from vtsbench.jsonio import strict_validator
 
     path = Path(__file__).resolve().parent.parent / "schemas" / "stream.schema.json"
-    validator = strict_validator(json.loads(path.read_text(encoding="utf-8")))
+    return strict_validator(json.loads(path.read_text(encoding="utf-8")))
+
+
+def line_errors(doc: Any) -> list[str]:
+    """Every violation of schemas/stream.schema.json by one line's object, one line each."""
     return [f"{'/'.join(map(str, e.absolute_path)) or '(line)'}: {e.message}"
-            for e in validator.iter_errors(doc)]
-
-
-def sha256(path: str | Path) -> str:
-    import hashlib
-
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+            for e in _line_validator().iter_errors(doc)]
 
 
 def header(monitor: Any, source: Source, *, realtime: bool, device: str) -> dict[str, Any]:
     """The first line: the format, recipe, checkpoint and its sha256, the source and its fps,
     window, smoothing, classes, and the environment (torch threads among them)."""
+    from vtsbench.dataset.format.provenance import sha256_file
     from vtsbench.environment import environment
 
     d = monitor.describe()
     return {"type": "header", "format": FORMAT, "format_version": FORMAT_VERSION,
             "recipe": d["recipe"], "checkpoint": monitor.checkpoint,
-            "checkpoint_sha256": sha256(monitor.checkpoint) if monitor.checkpoint else None,
+            "checkpoint_sha256":
+                sha256_file(Path(monitor.checkpoint)) if monitor.checkpoint else None,
             "source": {"kind": source.kind, "name": source.name, "fps": source.fps,
                        "realtime": bool(realtime or source.live)},
             "episode": source.episode or None, "fps": source.fps, "window": d["window"],

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from ..errors import VtsError
 
@@ -21,11 +22,9 @@ class StreamPrediction:
     submission: Path
 
 
-def split_episode_ids(dataset: str | Path, split: str, part: str) -> list[str]:
-    """The episode ids of a split part of a dataset's episodes (one line if it has none)."""
-    import vtsbench
-
-    ds = vtsbench.load(dataset)
+def split_episode_ids(ds: Any, dataset: str | Path, split: str, part: str) -> list[str]:
+    """The episode ids of a split part of a loaded dataset's episodes (one line naming
+    `dataset` if it has none)."""
     if not len(ds.episodes):
         raise VtsError("the dataset holds no episodes: streams are predicted on episodes "
                        "(vtsbench.create, vtsbench simulate-episodes)", dataset)
@@ -43,11 +42,14 @@ def predict_streams(recipe: str | Path, checkpoint: str | Path, dataset: str | P
     nothing)."""
     from contextlib import nullcontext
 
+    import vtsbench
+
     from ..atomic import replacing
     from .monitor import Monitor
     from .stream import LineWriter, episode_source, run_stream
 
-    ids = split_episode_ids(dataset, split, part)
+    ds = vtsbench.load(dataset)  # once: every episode's frames are read from it
+    ids = split_episode_ids(ds, dataset, split, part)
     monitor = Monitor.from_checkpoint(recipe, checkpoint, device=device, smoothing=smoothing)
     calls = 0
     bar_cm = nullcontext(None)
@@ -64,7 +66,7 @@ def predict_streams(recipe: str | Path, checkpoint: str | Path, dataset: str | P
         write = LineWriter(fh)
         for eid in ids:
             monitor.reset()
-            summary = run_stream(monitor, episode_source(dataset, eid), write, device=device)
+            summary = run_stream(monitor, episode_source(dataset, eid, ds), write, device=device)
             calls += int(summary["calls"])
             if bar is not None:
                 bar.advance(task)

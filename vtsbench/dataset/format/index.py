@@ -300,11 +300,17 @@ def frame_rows(table: pa.Table, kind: str, frames_per_sequence: int,
     """The episode-store rows of each sample of a views index (format 1.3), (n, T) int64 in
     index order: frame_row + 0..T-1 for slip (T = frames_per_sequence), frame_row for static
     (T = 1); `frames` keeps those frame numbers of each slip sequence."""
-    start = np.asarray(table.column("frame_row").to_numpy(zero_copy_only=False), np.int64)
+    return store_rows(table.column("frame_row").to_numpy(zero_copy_only=False), kind,
+                      frames_per_sequence, frames)
+
+
+def store_rows(start: np.ndarray, kind: str, frames_per_sequence: int,
+               frames: np.ndarray | None = None) -> np.ndarray:
+    """frame_rows from the samples' first store rows (`start`, one per sample), (n, T) int64."""
     offsets = np.arange(frames_per_sequence if kind == "slip" else 1, dtype=np.int64)
     if frames is not None:
         offsets = offsets[np.asarray(frames, np.int64)]
-    return start[:, None] + offsets[None, :]
+    return np.asarray(start, np.int64)[:, None] + offsets[None, :]
 
 
 def view_problems(table: pa.Table, kind: str, frames_per_sequence: int, starts: np.ndarray,

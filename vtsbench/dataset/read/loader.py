@@ -23,7 +23,13 @@ import zarr
 
 from ...errors import VtsError
 from ..format.arrays import depth_to_mm, zarr_problems
-from ..format.index import counts_problems, ids_problems, read_index, view_problems
+from ..format.index import (
+    counts_problems,
+    ids_problems,
+    read_index,
+    store_rows,
+    view_problems,
+)
 from ..format.info import DatasetInfo, load_info
 from ..format.layout import (
     DECODED_DTYPES,
@@ -225,13 +231,9 @@ class KindStore:
         if self.episodes is None:
             raise VtsError(f"the {self.kind} samples are views of the episode store, and it is "
                            "not open (read them from vtsbench.load)", self.loc.url)
-        slip = self.kind == "slip"
-        offsets = np.arange(self.info.frames_per_sequence if slip else 1, dtype=np.int64)
-        if frames is not None:
-            offsets = offsets[np.asarray(frames, np.int64)]
-        want = self.frame_row[rows][:, None] + offsets[None, :]
+        want = store_rows(self.frame_row[rows], self.kind, self.info.frames_per_sequence, frames)
         data = self.episodes.read_frames(want.reshape(-1), names)
-        lead = (len(rows), len(offsets)) if slip else (len(rows),)
+        lead = want.shape if self.kind == "slip" else (len(rows),)
         return {n: a.reshape(*lead, *a.shape[1:]) for n, a in data.items()}
 
 

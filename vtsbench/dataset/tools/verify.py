@@ -197,6 +197,7 @@ def check_splits(root: Path, info: DatasetInfo, index: dict[str, Any],
     from ..splits.leaks import split_problems
 
     splits = []
+    episodes: Any = None
     folder = root / SPLITS_DIR
     max_bytes, max_ids = split_limits(sum(s.get("rgb", (0,))[0] for s in info.shapes.values()))
     for name, sha in sorted(info.splits.items()):
@@ -219,12 +220,13 @@ def check_splits(root: Path, info: DatasetInfo, index: dict[str, Any],
             report.problems += [f"{rel}: {b}" for b in bad]
             report.problems += [f"{rel}: leak: {name}: {x}" for x in leaks]
         elif sp.kind == EPISODE and info.episodes is not None:  # splits over episodes
-            try:
-                episodes = read_table(root, "episodes")
-            except VtsError:
-                continue  # reported with the indexes
+            if episodes is None:  # read once for every split of episodes
+                try:
+                    episodes = split_table(read_table(root, "episodes"))
+                except VtsError:
+                    continue  # reported with the indexes
             report.problems += [f"{rel}: leak: {name}: {x}"
-                                for x in episode_leaks(sp, split_table(episodes))]
+                                for x in episode_leaks(sp, episodes)]
     listed = set(info.splits)
     if folder.is_dir():
         extra = [p.name for p in sorted(folder.glob("*.json")) if p.stem not in listed]
