@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 import vtsbench
 from tests.fixtures.datasets import tree_bytes
-from tests.fixtures.faults import Crash, FailingOs
+from tests.fixtures.faults import Crash, FailingOs, count_renames
 from vtsbench import atomic
 from vtsbench.cli import app
 from vtsbench.cli.episodes import simulate_episodes as command
@@ -35,16 +35,14 @@ OPTS = EpisodeOptions(8, 2, 2, 25.0, 3.0, (48, 64), 0)
 def reference(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int]:
     """The command's dataset written in one go, and how many renames it took."""
     out = tmp_path_factory.mktemp("ref") / "ds"
-    counter = FailingOs(0)
-    mp = pytest.MonkeyPatch()
-    mp.setattr(atomic, "os", counter)
-    try:
-        res = CliRunner().invoke(app, ["simulate-episodes", str(out), *ARGS])
-    finally:
-        mp.undo()
+    runs = []
+    with pytest.MonkeyPatch.context() as mp:
+        renames = count_renames(mp, lambda: runs.append(
+            CliRunner().invoke(app, ["simulate-episodes", str(out), *ARGS])))
+    res = runs[0]
     assert res.exit_code == 0, res.output
     assert "wrote 8 takes of 3 s at 25 fps" in res.output
-    return out, counter.calls
+    return out, renames
 
 
 def test_the_command_writes_takes_and_samples(reference: tuple[Path, int]) -> None:

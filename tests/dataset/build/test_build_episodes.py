@@ -17,7 +17,7 @@ import pytest
 import vtsbench
 from tests.fixtures.cli import clean, run
 from tests.fixtures.datasets import SHARD_MB, tree_bytes
-from tests.fixtures.faults import Crash, FailingOs
+from tests.fixtures.faults import Crash, FailingOs, count_renames
 from vtsbench import atomic
 from vtsbench.dataset.build import BuildOptions, build
 from vtsbench.dataset.build.staging import partial_path
@@ -96,11 +96,8 @@ def test_a_failure_at_every_write_and_rename_then_resume(make_recordings, tmp_pa
                                                          ) -> None:
     root, _ = make_recordings()
     opts = BuildOptions(depth=False, store="episodes", shard_mb=0.05)
-    counter = FailingOs(0)
-    monkeypatch.setattr(atomic, "os", counter)
-    ref = build(root, tmp_path / "ref" / "ds", opts).out
-    monkeypatch.setattr(atomic, "os", os)
-    steps = counter.calls
+    ref = tmp_path / "ref" / "ds"
+    steps = count_renames(monkeypatch, lambda: build(root, ref, opts))
     assert steps > 10
     for at in range(1, steps + 1):
         out = tmp_path / f"run{at}" / "ds"

@@ -6,18 +6,14 @@ from __future__ import annotations
 
 import os
 import signal
-import subprocess
-import sys
-import textwrap
 from pathlib import Path
 
 import pytest
 
 import vtsbench
-from tests.fixtures.data import ROOT
 from tests.fixtures.datasets import tree_bytes
 from tests.fixtures.episodes import FPS, SHARD_MB, takes, write_takes
-from tests.fixtures.faults import Crash, FailingOs
+from tests.fixtures.faults import Crash, FailingOs, count_renames, run_killed
 from vtsbench import atomic
 from vtsbench.dataset.build.staging import partial_path
 from vtsbench.errors import VtsError
@@ -27,14 +23,8 @@ from vtsbench.errors import VtsError
 def reference(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int]:
     """The dataset written in one go, and how many renames writing it took."""
     out = tmp_path_factory.mktemp("ref") / "ds"
-    counter = FailingOs(0)
-    mp = pytest.MonkeyPatch()
-    mp.setattr(atomic, "os", counter)
-    try:
-        write_takes(out, takes(), name="ds")
-    finally:
-        mp.undo()
-    return out, counter.calls
+    with pytest.MonkeyPatch.context() as mp:
+        return out, count_renames(mp, lambda: write_takes(out, takes(), name="ds"))
 
 
 def test_a_failure_at_every_write_and_rename_then_resume(
@@ -81,9 +71,7 @@ def test_sigkill_mid_episode_loses_that_episode_only(reference: tuple[Path, int]
     if not hasattr(signal, "SIGKILL"):
         pytest.skip("needs SIGKILL")
     out = tmp_path / "ds"
-    script = textwrap.dedent(f"""
-        import os, signal, sys
-        sys.path.insert(0, {str(ROOT)!r})
+    run_killed(f"""
         import vtsbench
         from tests.fixtures.episodes import FPS, SHARD_MB, takes
         eps = takes()
@@ -94,10 +82,7 @@ def test_sigkill_mid_episode_loses_that_episode_only(reference: tuple[Path, int]
         third = eps[2]
         for i in range(15):  # past a shard boundary: a full shard of unsaved frames written
             w.add_frame(third["frames"][i], timestamp=third["timestamps"][i])
-        os.kill(os.getpid(), signal.SIGKILL)
     """)
-    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, cwd=ROOT)
-    assert proc.returncode == -signal.SIGKILL, proc.stderr.decode()[-2000:]
     assert not out.exists() and partial_path(out).is_dir()
     assert not (partial_path(out) / "meta" / "info.json").exists()
     with pytest.raises(VtsError, match="2 episode"):

@@ -7,9 +7,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import subprocess
-import sys
-import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -18,10 +15,9 @@ import pyarrow.parquet as pq
 import pytest
 
 import vtsbench
-from tests.fixtures.data import ROOT
 from tests.fixtures.datasets import tree_bytes
 from tests.fixtures.episodes import FPS, SHARD_MB, takes
-from tests.fixtures.faults import Crash, FailingOs
+from tests.fixtures.faults import Crash, FailingOs, count_renames, run_killed
 from vtsbench import atomic
 from vtsbench.dataset.build.staging import partial_path
 from vtsbench.dataset.format.records import SplitFile
@@ -206,11 +202,7 @@ def test_a_split_whose_parts_share_frames_is_refused_and_a_scheme_skipped(tmp_pa
 def test_a_failure_at_every_write_and_rename_then_resume(views: Path, tmp_path: Path,
                                                          monkeypatch: pytest.MonkeyPatch
                                                          ) -> None:
-    counter = FailingOs(0)
-    monkeypatch.setattr(atomic, "os", counter)
-    write(tmp_path / "count" / "ds")
-    monkeypatch.setattr(atomic, "os", os)
-    steps = counter.calls
+    steps = count_renames(monkeypatch, lambda: write(tmp_path / "count" / "ds"))
     assert steps > 20
     for at in range(1, steps + 1):
         out = tmp_path / f"run{at}" / "ds"
@@ -234,9 +226,7 @@ def test_sigkill_after_add_sample_loses_the_samples_since_the_last_save(views: P
     if not hasattr(signal, "SIGKILL"):
         pytest.skip("needs SIGKILL")
     out = tmp_path / "ds"
-    script = textwrap.dedent(f"""
-        import os, signal, sys
-        sys.path.insert(0, {str(ROOT)!r})
+    run_killed(f"""
         import vtsbench
         from tests.fixtures.episodes import FPS, SHARD_MB, takes
         eps = takes()
@@ -246,10 +236,7 @@ def test_sigkill_after_add_sample_loses_the_samples_since_the_last_save(views: P
         w.add_sample("static", episode=0, start=1, sample_id="kept")
         w.add_episode(**eps[1])  # commits "kept"
         w.add_sample("static", episode=1, start=1, sample_id="lost")
-        os.kill(os.getpid(), signal.SIGKILL)
     """)
-    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, cwd=ROOT)
-    assert proc.returncode == -signal.SIGKILL, proc.stderr.decode()[-2000:]
     w = vtsbench.create(out, fps=FPS, shard_mb=SHARD_MB, sensor="gelsight-mini", name="views",
                         frames_per_sequence=T, resume=True)
     try:

@@ -15,7 +15,7 @@ import pytest
 import vtsbench
 from tests.fixtures.datasets import tree_bytes
 from tests.fixtures.episode_video import FPS, SHARD_MB, video_takes, write_video_takes
-from tests.fixtures.faults import Crash, FailingOs
+from tests.fixtures.faults import Crash, FailingOs, count_renames
 from vtsbench import atomic
 from vtsbench.dataset.build.staging import partial_path
 from vtsbench.dataset.format.info import info_schema_errors
@@ -67,11 +67,8 @@ def test_the_same_takes_give_the_same_bytes(ffv1_ds: Path, tmp_path: Path) -> No
 def test_a_failure_at_every_write_and_rename_then_resume(
         ffv1_ds: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     eps = video_takes(depth=True)
-    counter = FailingOs(0)
-    monkeypatch.setattr(atomic, "os", counter)
-    write_video_takes(tmp_path / "count" / "ds", eps, "ffv1", name="ds")
-    monkeypatch.setattr(atomic, "os", os)
-    steps = counter.calls
+    steps = count_renames(monkeypatch, lambda: write_video_takes(
+        tmp_path / "count" / "ds", eps, "ffv1", name="ds"))
     assert steps > 10
     for at in range(1, steps + 1):
         out = tmp_path / f"run{at}" / "ds"
