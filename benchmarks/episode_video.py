@@ -29,7 +29,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from episodes import DEFAULT, folder_bytes  # benchmarks/episodes.py: the same take
+from episodes import DEFAULT  # benchmarks/episodes.py: the same take
+from hf import folder_bytes  # benchmarks/hf.py
 from machine import machine  # benchmarks/machine.py: the shared machine line
 
 import vtsbench
@@ -90,7 +91,7 @@ def main() -> None:
             out = work / str(video)
             secs = write(frames, out, args.fps, video, obj)
             rows[video] = {"secs": secs, "total": folder_bytes(out),
-                           "data": folder_bytes(out, "data"),
+                           "data": folder_bytes(out / "data"),
                            "in order": windows_per_s(out, "in order", args.passes),
                            "random": windows_per_s(out, "random", args.passes)}
         ref = vtsbench.load(work / "None").episodes[0]["rgb"]

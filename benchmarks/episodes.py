@@ -39,6 +39,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from hf import folder_bytes  # benchmarks/hf.py
 from machine import machine  # benchmarks/machine.py: the shared machine line
 
 import vtsbench
@@ -47,12 +48,6 @@ from vtsbench.recordings.media import read_frames
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT = (ROOT.parent / "shared" / "data" / "real" / "incipient_slip_sample" / "blue_mug"
            / "exp_num_1" / "camera_0.avi")
-
-
-def folder_bytes(path: Path, under: str = "") -> int:
-    """Bytes of the files under a folder (or its sub-folder `under`)."""
-    base = path / under if under else path
-    return sum(p.stat().st_size for p in base.rglob("*") if p.is_file())
 
 
 def vts(*args: str) -> float:
@@ -148,13 +143,16 @@ def simulated(work: Path) -> dict[int, Path]:
 
 
 def size_rows(label: str, built: dict[tuple[int, str], tuple[Path, float]]) -> None:
-    """Markdown rows: bytes and build seconds of --store samples and episodes per stride."""
+    """Markdown table: bytes and build seconds of --store samples and episodes per stride."""
+    print("| recordings | store | samples (static + slip) | frames stored | data/ | "
+          "whole folder | vs samples | build |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|")
     for (stride, store), (out, secs) in sorted(built.items(), key=lambda x: (-x[0][0],
                                                                              x[0][1] != "samples")):
         ds = vtsbench.load(out)
         stored = (len(ds.episodes.frames) if store == "episodes" and len(ds.episodes)
                   else len(ds.slip) * 8 + len(ds.static))
-        total, data = folder_bytes(out), folder_bytes(out, "data")
+        total, data = folder_bytes(out), folder_bytes(out / "data")
         base = folder_bytes(built[(stride, "samples")][0])
         print(f"| {label}, windows of 8 at stride {stride} | `--store {store}` | "
               f"{len(ds.static)} + {len(ds.slip)} | {stored} | {data / 1e6:.2f} MB | "
@@ -174,9 +172,6 @@ def main() -> None:
             print("Samples as views of the episodes: `vtsbench build --store samples` against "
                   "`--store episodes` of the same manifest (build seconds of the command, "
                   "one worker).\n")
-            print("| recordings | store | samples (static + slip) | frames stored | data/ | "
-                  "whole folder | vs samples | build |")
-            print("|---|---|---:|---:|---:|---:|---:|---:|")
             recs = simulated(work)
             sim = {(s, store): (work / f"sim-built-{s}-{store}", vts(
                 "build", str(rec), str(work / f"sim-built-{s}-{store}"), "--quiet", "--store",
@@ -194,7 +189,7 @@ def main() -> None:
                 for s in (1, 8) for store in ("samples", "episodes")}
         built = {s: made[(s, "samples")][:2] for s in (1, 8)}
         both = {k: (v[0], v[2]) for k, v in made.items()}
-        ep_total, ep_data = folder_bytes(ep_out), folder_bytes(ep_out, "data")
+        ep_total, ep_data = folder_bytes(ep_out), folder_bytes(ep_out / "data")
         print(f"Take: {args.video.name} of {args.video.parent.parent.name}/"
               f"{args.video.parent.name}, {n} frames at {args.fps:g} fps.\n")
         print("| dataset | frames stored | data/ | data/ per frame | whole folder | "
@@ -205,16 +200,13 @@ def main() -> None:
         for s, (out, secs) in built.items():
             ds = vtsbench.load(out)
             stored = len(ds.slip) * 8
-            total, data = folder_bytes(out), folder_bytes(out, "data")
+            total, data = folder_bytes(out), folder_bytes(out / "data")
             print(f"| 8-frame windows at stride {s} (`manifest` + `build --no-depth`, "
                   f"{secs:.1f} s) | {stored} | {data / 1e6:.2f} MB | "
                   f"{data / stored / 1e3:.1f} KB | {total / 1e6:.2f} MB | "
                   f"{total / ep_total:.2f}x |")
         print("\nThe same manifests built with `--store samples` and `--store episodes` "
               "(build seconds of the command alone):\n")
-        print("| recordings | store | samples (static + slip) | frames stored | data/ | "
-              "whole folder | vs samples | build |")
-        print("|---|---|---:|---:|---:|---:|---:|---:|")
         size_rows(f"real take {args.video.name} ({n} frames, RGB)", both)
         print("\nWindows read from the one episode store, no rebuild (every window once, "
               "batches of 64, best of 2):\n")

@@ -33,18 +33,12 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numpy as np
+from episodes import DEFAULT  # benchmarks/episodes.py: the same take
+from hf import folder_bytes  # benchmarks/hf.py
 from machine import machine  # benchmarks/machine.py: the shared machine line
 
 import vtsbench
 from vtsbench.recordings.media import read_frames
-
-ROOT = Path(__file__).resolve().parent.parent
-DEFAULT = (ROOT.parent / "shared" / "data" / "real" / "incipient_slip_sample" / "blue_mug"
-           / "exp_num_1" / "camera_0.avi")
-
-
-def folder_bytes(path: Path) -> int:
-    return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
 
 
 def zarr_read(out: Path) -> tuple[np.ndarray, np.ndarray]:

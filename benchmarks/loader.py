@@ -437,13 +437,13 @@ def run(work: Path, a: argparse.Namespace, size: tuple[int, int]) -> str:
     lines += [row(b, b) for b in base.values() if b in rates]
     lines += [row(k, b) for k, b in torch_rows]
     lines += [row(k, base["all"]) for k in hf_rows]
+    nbytes = frames * h * w * (3 + 4)
     lines += ["", "Ratios: each torch row to the Zarr loader reading the same arrays, the "
               "others to it reading rgb + depth + contact. DataLoader batch 4; an rgbd sample at "
               f"{h}x{w} is "
-              f"{frames * h * w * (3 + 4) / 1e6:.1f} MB as uint8 rgb + float32 mm depth, "
+              f"{nbytes / 1e6:.1f} MB as uint8 rgb + float32 mm depth, "
               f"{frames * h * w * 16 / 1e6:.1f} MB as float32. `vtsbench build`: "
               f"{build_s:.1f} s."]
-    nbytes = frames * h * w * (3 + 4)
     alloc, shm, populated, fresh, reused = shared_memory_ms(nbytes)
     lines += ["", f"Moving one rgbd sample ({nbytes / 1e6:.1f} MB) into torch's shared memory, "
               f"as a DataLoader worker does: {shm:.1f} ms of CPU ({alloc:.1f} ms allocating: "

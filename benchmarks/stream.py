@@ -36,6 +36,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -60,30 +61,28 @@ FLOW_CONFIGS = (
 ACCURACY_SEQUENCES, ACCURACY_SEED = 900, 26
 
 
-def dataset(root: Path, size: tuple[int, int]) -> Path:
-    """A small simulated RGB-only dataset at size."""
+def simulated(rec: Path, ds: Path, **sim: Any) -> Path:
+    """ds: recordings simulated into rec with sim (no presses) built RGB-only; kept if there."""
     from vtsbench.dataset.build import BuildOptions, build
     from vtsbench.sim.simulate import simulate
 
-    rec, ds = root / f"rec-{size[0]}", root / f"ds-{size[0]}"
     if not ds.exists():
-        simulate(rec, seed=7, n_static=12, n_sequences=12, n_presses=0, size=size,
-                 mm_per_px=0.06 * 240 / size[0], progress=False)
+        simulate(rec, n_presses=0, progress=False, **sim)
         build(rec, ds, BuildOptions(depth=False))
     return ds
+
+
+def dataset(root: Path, size: tuple[int, int]) -> Path:
+    """A small simulated RGB-only dataset at size."""
+    return simulated(root / f"rec-{size[0]}", root / f"ds-{size[0]}", seed=7, n_static=12,
+                     n_sequences=12, size=size, mm_per_px=0.06 * 240 / size[0])
 
 
 def accuracy_dataset(root: Path) -> Path:
     """The simulated RGB-only 480x640 dataset the flow configs are scored on."""
-    from vtsbench.dataset.build import BuildOptions, build
-    from vtsbench.sim.simulate import simulate
-
-    rec, ds = root / "acc-rec-480", root / "acc-ds-480"
-    if not ds.exists():
-        simulate(rec, seed=ACCURACY_SEED, n_static=30, n_sequences=ACCURACY_SEQUENCES,
-                 n_presses=0, size=(480, 640), mm_per_px=0.03, progress=False)
-        build(rec, ds, BuildOptions(depth=False))
-    return ds
+    return simulated(root / "acc-rec-480", root / "acc-ds-480", seed=ACCURACY_SEED,
+                     n_static=30, n_sequences=ACCURACY_SEQUENCES, size=(480, 640),
+                     mm_per_px=0.03)
 
 
 def wilson(k: int, n: int) -> tuple[float, float]:
