@@ -5,6 +5,8 @@ from __future__ import annotations
 import importlib.util
 import sys
 
+import numpy as np
+
 from tests.fixtures.data import ROOT
 
 SCRIPT = ROOT / "benchmarks" / "results.py"
@@ -287,17 +289,21 @@ def test_stream_frames_and_live_stream(vts_dataset, tmp_path) -> None:
     assert (frames[-t:] == test.sample(len(test) - 1, ("rgb",))["rgb"]).all()
     threads = torch.get_num_threads()
     ckpt = train("flow", vts_dataset, tmp_path / "flow")
-    out = mod.live_stream("flow", str(ckpt), frames, fps=50.0)
-    assert out["frames"] == len(frames) and out["window"] == t
+    # 3.2 s of stream: a loaded machine drops frames, and a stream of only two windows may
+    # leave fewer than a window to the monitor (no call: refused)
+    played = np.concatenate([frames] * 10)
+    out = mod.live_stream("flow", str(ckpt), played, fps=50.0)
+    assert out["frames"] == len(played) and out["window"] == t
     assert out["processed"] + out["dropped"] == out["frames"] and out["calls"] >= 1
     assert out["calls_what"] == "state, direction" and out["latency_ms_p95"] >= 0
     assert out["opencv_threads"] >= 1
     assert 0 < out["fps_sustained"] <= 50.0 * 1.2
     run = {"run": mod.Run("flow-x", "flow", "unseen_objects"), "checkpoint": str(ckpt)}
-    live, meta = mod.live_rows([run], {"synthetic": vts_dataset}, 0.5)
+    # 2 s: enough windows for a call even when a loaded machine drops frames
+    live, meta = mod.live_rows([run], {"synthetic": vts_dataset}, 2.0)
     assert [(r["method"], r["split"], r["window"]) for r in live] == [
         ("flow-x", "unseen_objects", t)]
-    assert meta["fps"] == 25.0 and meta["seconds"] == 0.5 and meta["load"] >= 0
+    assert meta["fps"] == 25.0 and meta["seconds"] == 2.0 and meta["load"] >= 0
     assert meta["streams"]["synthetic/unseen_objects"]["frames"] == live[0]["frames"]
     bad = tmp_path / "not-a-checkpoint.safetensors"
     bad.write_bytes(b"no")
