@@ -18,6 +18,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from live import play, warm_up
 from results_matrix import Run, expected_cost
 from slip_effects import wilson
 
@@ -311,30 +312,15 @@ def live_stream(recipe: str, checkpoint: str, frames: Any, fps: float = STREAM_F
 
     from vtsbench.errors import VtsError
     from vtsbench.recipes.monitor import Monitor
-    from vtsbench.recipes.stream import LineWriter, Source, run_stream
-
-    class Discard:
-        def write(self, data: bytes) -> None:
-            pass
-
-        def flush(self) -> None:
-            pass
-
-    def gen() -> Any:
-        for k, f in enumerate(frames):
-            yield k, k / fps, f
 
     threads, strict = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
     try:
         monitor = Monitor.from_checkpoint(recipe, checkpoint, device="cpu")
-        for f in frames[:monitor.frames]:  # warm up: the first torch call, OpenCV's first DIS
-            monitor.push(f)
-        monitor.reset()
+        warm_up(monitor, frames)  # the first torch call, OpenCV's first DIS
         import cv2
 
         used, cv_used = torch.get_num_threads(), cv2.getNumThreads()
-        summary = run_stream(monitor, Source("video", "results page stream", fps, gen),
-                             LineWriter(Discard()), realtime=True, device="cpu")
+        summary = play(monitor, frames, fps, "results page stream")
         classes = monitor.describe()["classes"]
         calls = "object" if "object" in classes else "state, direction"
         return {**{k: summary[k] for k in ("frames", "processed", "dropped", "calls",

@@ -42,6 +42,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 sys.path.insert(0, str(ROOT))
 
+from live import play, warm_up  # noqa: E402
 from machine import machine  # noqa: E402
 from results_matrix import DEMO_RESNET, DEMO_TSF  # noqa: E402
 
@@ -264,27 +265,12 @@ def stream_frames(ds: Path, n: int):
 
 
 def live_stream(recipe: str, ckpt: Path, frames) -> dict:
-    """The monitor on the frames played at FPS (realtime: drops counted)."""
+    """The monitor on the frames played at FPS (realtime: drops counted; benchmarks/live.py)."""
     from vtsbench.recipes.monitor import Monitor
-    from vtsbench.recipes.stream import LineWriter, Source, run_stream
-
-    class Null:
-        def write(self, data: bytes) -> None:
-            pass
-
-        def flush(self) -> None:
-            pass
-
-    def gen():
-        for k, f in enumerate(frames):
-            yield k, k / FPS, f
 
     monitor = Monitor.from_checkpoint(recipe, ckpt, device="cpu")
-    for f in frames[:monitor.frames]:  # warm up (first torch call, OpenCV's first DIS)
-        monitor.push(f)
-    monitor.reset()
-    return run_stream(monitor, Source("video", "bench", FPS, gen), LineWriter(Null()),
-                      realtime=True, device="cpu")
+    warm_up(monitor, frames)
+    return play(monitor, frames, FPS, "bench")
 
 
 def main() -> None:

@@ -233,3 +233,29 @@ def test_refusals_are_one_line(takes: tuple[Path, list[str]], tmp_path: Path) ->
     (tmp_path / "j.jsonl").write_text(json.dumps(good[0][0]) + "\n{not json\n")
     with pytest.raises(VtsError, match="line 2 is not JSON"):
         score_streams(tmp_path / "j.jsonl", vtsbench.load(ds), "unseen_objects", "test")
+
+
+def test_eval_reads_and_checks_a_stream_submission_once(takes: tuple[Path, list[str]],
+                                                        tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Scores, the submission's sha256 and the timeline figure come from one read."""
+    import hashlib
+
+    import vtsbench.evaluation.stream as stream
+    from vtsbench.evaluation.report import evaluate_submission
+
+    ds, ids = takes
+    sub = _write(tmp_path / "sub.jsonl", [_perfect(ds, e) for e in ids])
+    reads = []
+    real = stream.read_stream_submission
+
+    def counted(path: Any) -> Any:
+        reads.append(path)
+        return real(path)
+
+    monkeypatch.setattr(stream, "read_stream_submission", counted)
+    res, _, _ = evaluate_submission(sub, ds, "unseen_objects", "test", tmp_path / "ev")
+    assert reads == [sub]
+    assert (tmp_path / "ev" / "stream_timeline.png").is_file()
+    assert res.submission.sha256 == hashlib.sha256(sub.read_bytes()).hexdigest()
+    assert res.submission.file == "sub.jsonl"

@@ -20,7 +20,7 @@ from ..errors import VtsError
 from . import metrics as M
 from .magnitude import slip_motion
 from .report import cell, evaluate_submission, score
-from .result import DatasetRef, TaskResult, tasks_from_dict, tasks_to_dict
+from .result import DatasetRef, EvalResult, TaskResult, tasks_from_dict, tasks_to_dict
 from .submission import Submission, load_truth, open_dataset
 from .tasks import BOARDS, TASKS, Column, headline_column, kind_of, task_columns
 
@@ -75,17 +75,34 @@ def add(submission: str | Path, dataset: str | Path | VtsDataset, split: str, pa
     assert sub is not None and truth is not None
     eid, path = _entry_path(Path(root), truth.dataset, split, str(sub.meta["method"]),
                             sub.sha256, replace)
+    return _write_entry(path, _entry(
+        eid, result, split, part, sub.meta["method"], sub.meta.get("recipe"), sub.seeds,
+        sub.meta, {"sample_ids": truth.ids, "tasks": {
+            t: {str(s): a.tolist() for s, a in by.items()} for t, by in sub.preds.items()}}))
+
+
+def _entry(eid: str, result: EvalResult, split: str, part: str, method: str,
+           recipe: str | None, seeds: list[int], meta: Mapping[str, Any],
+           predictions: Mapping[str, Any]) -> dict[str, Any]:
+    """A leaderboard entry (schemas/leaderboard_entry.schema.json) of a scored result: its
+    window tasks' metrics, and a stream result's scores under `stream`."""
     entry = {
         "entry_version": ENTRY_VERSION, "id": eid,
         "added": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
-        "method": sub.meta["method"], "recipe": sub.meta.get("recipe"), "seeds": sub.seeds,
-        "meta": sub.meta, "submission_sha256": sub.sha256,
+        "method": method, "recipe": recipe, "seeds": seeds,
+        "meta": meta, "submission_sha256": result.submission.sha256,
         "dataset": result.dataset.to_dict(), "split": split, "part": part,
         "metric_version": result.metric_version, "vtsbench_version": result.vtsbench_version,
         "metrics": tasks_to_dict(result.tasks), "rescored_from": [],
-        "predictions": {"sample_ids": truth.ids, "tasks": {
-            t: {str(s): a.tolist() for s, a in by.items()} for t, by in sub.preds.items()}},
+        "predictions": predictions,
     }
+    if result.stream is not None:
+        entry["stream"] = result.stream.to_dict()
+    return entry
+
+
+def _write_entry(path: Path, entry: Mapping[str, Any]) -> Path:
+    """Write an entry as its JSON file (its folder made); returns the path."""
     path.parent.mkdir(parents=True, exist_ok=True)
     write_text_atomic(path, json.dumps(entry, indent=1, allow_nan=False) + "\n")
     return path
@@ -115,17 +132,8 @@ def _add_stream(submission: str | Path, dataset: str | Path | VtsDataset, split:
     method = result.submission.method or sr.recipe
     eid, path = _entry_path(root, result.dataset.name, split, method, result.submission.sha256,
                             replace)
-    entry = {
-        "entry_version": ENTRY_VERSION, "id": eid,
-        "added": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
-        "method": method, "recipe": sr.recipe, "seeds": [0], "meta": {},
-        "submission_sha256": result.submission.sha256, "dataset": result.dataset.to_dict(),
-        "split": split, "part": part, "metric_version": result.metric_version,
-        "vtsbench_version": result.vtsbench_version, "metrics": {}, "rescored_from": [],
-        "predictions": {"sample_ids": [], "tasks": {}}, "stream": sr.to_dict()}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(path, json.dumps(entry, indent=1, allow_nan=False) + "\n")
-    return path
+    return _write_entry(path, _entry(eid, result, split, part, method, sr.recipe, [0], {},
+                                     {"sample_ids": [], "tasks": {}}))
 
 
 def stream_cell(value: Any, show: str) -> str:
@@ -286,6 +294,11 @@ def current_version(es: list[BoardEntry]) -> str:
     return max((e.dataset.dataset_version for e in es), key=_version_key)
 
 
+def _title(dataset: str, split: str, part: str) -> str:
+    """leaderboard.md's title: the dataset, split and part its entries were scored on."""
+    return f"# {md_cell(dataset)} / {md_cell(split)} ({md_cell(part)})"
+
+
 def render_folder(folder: Path) -> str:
     """The markdown of one dataset/split folder: the entries of the newest dataset version
     ranked, those scored on an earlier version listed apart as not comparable."""
@@ -296,8 +309,8 @@ def render_folder(folder: Path) -> str:
         if not streams:
             return ""
         e0 = streams[0]
-        return "\n".join([f"# {md_cell(e0['dataset']['name'])} / {md_cell(e0['split'])} "
-                          f"({md_cell(e0['part'])})", "", *render_streams(streams)]) + "\n"
+        return "\n".join([_title(e0["dataset"]["name"], e0["split"], e0["part"]), "",
+                          *render_streams(streams)]) + "\n"
     version = current_version(every)
     es = [e for e in every if e.dataset.dataset_version == version]
     old = [e for e in every if e.dataset.dataset_version != version]
@@ -305,8 +318,7 @@ def render_folder(folder: Path) -> str:
     main = BOARDS[kind].rank
     es.sort(key=lambda e: -(e.headline(main) or -1.0))
     split = es[0].split
-    lines = [f"# {md_cell(es[0].dataset.name)} / {md_cell(split)} "
-             f"({md_cell(es[0].part)})", "",
+    lines = [_title(es[0].dataset.name, split, es[0].part), "",
              f"Dataset version {md_cell(version)}: {len(es)} entries, best {main} accuracy "
              "first; mean ± standard deviation over seeds where there are several."
              + (f" {len(old)} entries scored on an earlier version are listed at the end." if old

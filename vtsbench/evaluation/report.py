@@ -159,28 +159,34 @@ def direction_line(result: EvalResult) -> str | None:
             f"angular error {'-' if mae is None else f'{mae:.1f}'} deg")
 
 
+def _heading(result: EvalResult) -> list[str]:
+    """report.md's title and what was scored: dataset, split part, submission; a window
+    submission's seeds and versions too (a stream's section states its own), then a blank."""
+    sub, ds = result.submission, result.dataset
+    stream = result.stream is not None
+    lines = [f"# Evaluation: {sub.method or sub.file}", "",
+             f"- dataset: {ds.name} {ds.dataset_version} (sha256 {ds.dataset_sha256[:12]})",
+             f"- split: {result.split} / {result.part} ({result.n_samples} "
+             + ("episodes)" if stream else f"{result.kind} samples)"),
+             f"- submission: {sub.file} (sha256 {sub.sha256[:12]})"
+             + ("" if stream else f", seeds {', '.join(map(str, sub.seeds))}")]
+    if not stream:
+        lines.append(f"- metric version {result.metric_version}, vtsbench "
+                     f"{result.vtsbench_version}")
+    return [*lines, ""]
+
+
 def render_markdown(result: EvalResult, figures: list[str]) -> str:
     """report.md: the summary, direction metrics, per-object accuracy, confusion matrices
     (a stream submission: its stream section and timeline)."""
-    sub, ds = result.submission, result.dataset
     if result.stream is not None:
         from .stream_result import stream_markdown
 
-        lines = [f"# Evaluation: {sub.method or sub.file}", "",
-                 f"- dataset: {ds.name} {ds.dataset_version} (sha256 {ds.dataset_sha256[:12]})",
-                 f"- split: {result.split} / {result.part} ({result.n_samples} episodes)",
-                 f"- submission: {sub.file} (sha256 {sub.sha256[:12]})", "",
-                 *stream_markdown(result.stream)]
+        lines = [*_heading(result), *stream_markdown(result.stream)]
         if figures:
             lines += ["", "## Figures", ""] + [f"![{p}]({p})" for p in figures]
         return "\n".join(lines) + "\n"
-    lines = [f"# Evaluation: {sub.method or sub.file}", "",
-             f"- dataset: {ds.name} {ds.dataset_version} (sha256 {ds.dataset_sha256[:12]})",
-             f"- split: {result.split} / {result.part} ({result.n_samples} {result.kind} "
-             "samples)",
-             f"- submission: {sub.file} (sha256 {sub.sha256[:12]}), seeds "
-             f"{', '.join(map(str, sub.seeds))}",
-             f"- metric version {result.metric_version}, vtsbench {result.vtsbench_version}", "",
+    lines = [*_heading(result),
              "| " + " | ".join(SUMMARY_HEAD) + " |", "|---" * len(SUMMARY_HEAD) + "|"]
     lines += ["| " + " | ".join(r) + " |" for r in summary_rows(result)]
     d = result.tasks.get(DIRECTION.name)
@@ -305,15 +311,21 @@ def evaluate_submission(submission: str | Path, dataset: str | Path | VtsDataset
     or a loaded dataset) and, when out is given, write metrics.json, report.md and PNGs.
     A stream submission (JSON lines starting with a stream header) is scored by
     evaluation/stream.py: the result's `stream`, with no Submission or Truth."""
-    from .stream import is_stream_submission, stream_result, write_stream_figure
+    from .stream import (
+        is_stream_submission,
+        read_stream_submission,
+        stream_result,
+        write_stream_figure,
+    )
 
     if is_stream_submission(submission):
         ds = open_dataset(dataset)
-        res = stream_result(submission, ds, split, part, _version())
+        streams = read_stream_submission(submission)  # read and checked once: scores, figure
+        res = stream_result(streams, ds, split, part, _version())
         if out is not None:
             out = Path(out)
             out.mkdir(parents=True, exist_ok=True)
-            names = [write_stream_figure(res, ds, submission, out)] if figures else []
+            names = [write_stream_figure(res, ds, streams, out)] if figures else []
             write_text_atomic(out / "metrics.json", res.to_json())
             write_text_atomic(out / "report.md", render_markdown(res, names))
         return res, None, None

@@ -66,9 +66,19 @@ def is_stream_submission(path: str | Path) -> bool:
         doc.get("format") == "vtsbench.stream"
 
 
-def read_streams(path: str | Path) -> list[Stream]:
-    """The streams of a submission, every line checked against schemas/stream.schema.json;
-    the first problem is one line naming the line number."""
+@dataclass(frozen=True)
+class StreamSubmission:
+    """A stream submission read and checked once: its file as given, its streams and the
+    sha256 of its bytes (what scoring, the result and the timeline figure share)."""
+
+    path: str | Path
+    streams: list[Stream]
+    sha256: str
+
+
+def read_stream_submission(path: str | Path) -> StreamSubmission:
+    """The streams of a submission, every line checked against schemas/stream.schema.json
+    (the first problem is one line naming the line number), and its sha256, in one read."""
     from ..recipes.stream import line_errors
 
     p = Path(path)
@@ -77,8 +87,10 @@ def read_streams(path: str | Path) -> list[Stream]:
     if p.stat().st_size > MAX_BYTES:
         raise VtsError(f"stream submission larger than {MAX_BYTES >> 20} MiB", p)
     streams: list[Stream] = []
+    digest = hashlib.sha256()
     with open(p, "rb") as fh:
         for no, raw in enumerate(fh, 1):
+            digest.update(raw)
             try:
                 doc = json.loads(raw)
             except ValueError as e:
@@ -104,7 +116,14 @@ def read_streams(path: str | Path) -> list[Stream]:
         raise VtsError("empty stream submission", p)
     if streams[-1].summary is None:
         raise VtsError("the last stream has no summary line (cut short?)", p)
-    return streams
+    return StreamSubmission(path, streams, digest.hexdigest())
+
+
+def _read(submission: str | Path | StreamSubmission) -> StreamSubmission:
+    """A submission as read and checked: the one given, or its file read now."""
+    if isinstance(submission, StreamSubmission):
+        return submission
+    return read_stream_submission(submission)
 
 
 def _truth(ds: Any, split: str, part: str) -> dict[str, dict[str, Any]]:
@@ -227,12 +246,14 @@ def aggregate(scores: Sequence[EpisodeScore], headers: Sequence[Mapping[str, Any
     return StreamResult.from_dict(sr.to_dict())  # NaN (undefined) as None, as in metrics.json
 
 
-def score_streams(path: str | Path, ds: Any, split: str, part: str) -> StreamResult:
-    """Read, check and score a stream submission on a split part of a dataset's episodes:
-    an episode of the part missing, one not in it, one twice, streams of several recipes or
-    smoothings, a stream that ended in an error or a call outside its episode are each one
-    line."""
-    streams = read_streams(path)
+def score_streams(submission: str | Path | StreamSubmission, ds: Any, split: str, part: str
+                  ) -> StreamResult:
+    """Score a stream submission (its file, read and checked here, or one already read) on a
+    split part of a dataset's episodes: an episode of the part missing, one not in it, one
+    twice, streams of several recipes or smoothings, a stream that ended in an error or a call
+    outside its episode are each one line."""
+    sub = _read(submission)
+    streams, path = sub.streams, sub.path
     truth = _truth(ds, split, part)
     seen: dict[str, Stream] = {}
     for s in streams:
@@ -267,28 +288,30 @@ def score_streams(path: str | Path, ds: Any, split: str, part: str) -> StreamRes
     return aggregate(scores, [first], [s for s in summaries if s is not None])
 
 
-def stream_result(path: str | Path, dataset: Any, split: str, part: str,
-                  version: str = "0+unknown") -> EvalResult:
-    """A stream submission scored, as an EvalResult (kind "episode", no window tasks;
-    `version`: vtsbench's)."""
+def stream_result(submission: str | Path | StreamSubmission, dataset: Any, split: str,
+                  part: str, version: str = "0+unknown") -> EvalResult:
+    """A stream submission (its file, or one already read) scored, as an EvalResult (kind
+    "episode", no window tasks; `version`: vtsbench's)."""
     from .result import DatasetRef, EvalResult, SubmissionRef
     from .submission import open_dataset
 
     ds = open_dataset(dataset)
-    sr = score_streams(path, ds, split, part)
+    sub = _read(submission)
+    sr = score_streams(sub, ds, split, part)
     info = ds.info
-    digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
     return EvalResult(M.METRIC_VERSION, version,
                       DatasetRef(info.name, info.dataset_version, info.dataset_sha256),
                       split, part, "episode", sr.n_episodes,
-                      SubmissionRef(Path(path).name, digest, method_name(sr), sr.recipe, (0,)),
+                      SubmissionRef(Path(sub.path).name, sub.sha256, method_name(sr),
+                                    sr.recipe, (0,)),
                       {}, stream=sr)
 
 
-def write_stream_figure(result: EvalResult, ds: Any, submission: str | Path, out: Path,
-                        most: int = 8) -> str:
+def write_stream_figure(result: EvalResult, ds: Any, submission: str | Path | StreamSubmission,
+                        out: Path, most: int = 8) -> str:
     """stream_timeline.png: per episode (slip ones first, at most `most`), the true state and
-    the reported state over time, the onset and the detection marked."""
+    the reported state over time, the onset and the detection marked (`submission`: the one
+    scored, as read for `stream_result`, or its file)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.colors import ListedColormap
     from matplotlib.figure import Figure
@@ -299,7 +322,7 @@ def write_stream_figure(result: EvalResult, ds: Any, submission: str | Path, out
     sr = result.stream
     assert sr is not None
     truth = _truth(ds, result.split, result.part)
-    calls = {s.header["episode"]["episode_id"]: s.calls for s in read_streams(submission)}
+    calls = {s.header["episode"]["episode_id"]: s.calls for s in _read(submission).streams}
     eps = sorted(sr.episodes, key=lambda e: (not e.slip, e.episode_id))[:most]
     cmap = ListedColormap(["white", "#ffe599", "#d9d9d9", "#6fa8dc", "#e06666"])  # no call,
     # unknown, static, press, slip: codes 0..4

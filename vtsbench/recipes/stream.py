@@ -241,17 +241,35 @@ def line_errors(doc: Any) -> list[str]:
             for e in _line_validator().iter_errors(doc)]
 
 
+def checkpoint_sha256(path: str | Path) -> str:
+    """The sha256 of a checkpoint file, hashed once while the file stays the same (its path,
+    size and modification time): a submission streams every episode with one checkpoint."""
+    import os
+
+    p = Path(path)
+    st = os.stat(p)
+    return _file_sha256(p, str(p.resolve()), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+
+
+@lru_cache(maxsize=8)
+def _file_sha256(path: Path, *same: object) -> str:
+    """sha256 of the file at `path`, cached on it and `same`, what identifies its bytes (where
+    it resolves to, device, inode, size, modification time)."""
+    from vtsbench.dataset.format.provenance import sha256_file
+
+    return sha256_file(path)
+
+
 def header(monitor: Any, source: Source, *, realtime: bool, device: str) -> dict[str, Any]:
     """The first line: the format, recipe, checkpoint and its sha256, the source and its fps,
     window, smoothing, classes, and the environment (torch threads among them)."""
-    from vtsbench.dataset.format.provenance import sha256_file
     from vtsbench.environment import environment
 
     d = monitor.describe()
     return {"type": "header", "format": FORMAT, "format_version": FORMAT_VERSION,
             "recipe": d["recipe"], "checkpoint": monitor.checkpoint,
             "checkpoint_sha256":
-                sha256_file(Path(monitor.checkpoint)) if monitor.checkpoint else None,
+                checkpoint_sha256(monitor.checkpoint) if monitor.checkpoint else None,
             "source": {"kind": source.kind, "name": source.name, "fps": source.fps,
                        "realtime": bool(realtime or source.live)},
             "episode": source.episode or None, "fps": source.fps, "window": d["window"],

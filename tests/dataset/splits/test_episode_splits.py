@@ -116,8 +116,9 @@ def test_leak_check_names_shared_object_and_unknown_id() -> None:
 
 
 def test_verify_reports_an_episode_split_that_leaks(ds_path: Path, tmp_path: Path) -> None:
-    """An episode moved into a second part of unseen_objects: verify names the leak (and the
-    changed file), as it does for the other kinds' splits."""
+    """An episode copied into a second part of unseen_objects in place of another: verify
+    names the leak (and the changed file), as it does for the other kinds' splits. (Listing
+    more ids than the dataset has episodes is refused before, as the loader refuses it.)"""
     import shutil
 
     copy = tmp_path / "ds"
@@ -125,7 +126,7 @@ def test_verify_reports_an_episode_split_that_leaks(ds_path: Path, tmp_path: Pat
     path = copy / split_path("unseen_objects")
     doc = json.loads(path.read_text())
     moved = doc["parts"]["test"][0]
-    doc["parts"]["train"] = sorted([*doc["parts"]["train"], moved])
+    doc["parts"]["train"] = sorted([*doc["parts"]["train"][1:], moved])
     path.write_text(json.dumps(doc))
     problems = verify(copy).problems
     assert any("leak: unseen_objects" in p and moved in p for p in problems), problems

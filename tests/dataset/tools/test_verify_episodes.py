@@ -82,3 +82,27 @@ def test_info_shows_the_episodes(written: Path) -> None:
     assert "episodes 4, 48 frames (0 dropped)" in res.output
     doc = json.loads((written / "meta/info.json").read_text())
     assert doc["episodes"]["objects"] == {"box": 1, "cloth": 1, "mug": 2}
+
+
+def test_verify_reads_the_episode_index_once(tmp_path: Path, monkeypatch) -> None:
+    """The index checks, the splits of episodes and the videos' probe share one read of
+    index/episodes.parquet; a video removed is still found, by its episode's length."""
+    import vtsbench.dataset.format.episodes as fe
+    from tests.fixtures.episode_video import video_takes, write_video_takes
+
+    ds = write_video_takes(tmp_path / "ds", video_takes(), "ffv1")
+    reads: list[str] = []
+    real = fe.read_table
+
+    def counted(source, which, *args, **kwargs):
+        reads.append(which)
+        return real(source, which, *args, **kwargs)
+
+    monkeypatch.setattr(fe, "read_table", counted)
+    report = verify(ds, decode=False)
+    assert report.ok, report.problems
+    assert reads.count("episodes") == 1 and reads.count("frames") == 1
+    (ds / "data" / "videos" / "episode-000001.mkv").unlink()
+    reads.clear()
+    assert verify(ds, decode=False).problems == ["data/videos/episode-000001.mkv: missing"]
+    assert reads.count("episodes") == 1

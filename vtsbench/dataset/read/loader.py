@@ -45,7 +45,7 @@ from ..format.layout import (
 from ..format.problems import short
 from ..format.records import SplitFile, part_key
 from ..splits.episodes import EPISODE, split_table
-from ..splits.files import read_split, split_limits
+from ..splits.files import dataset_split_limits, read_split
 from ..splits.leaks import split_problems
 from . import store
 from .arrays import check_arrays
@@ -335,9 +335,7 @@ class VtsDataset:
                            f"{', '.join(self.splits) or 'none'}")
         if name not in self._splits:
             rel = split_path(name)
-            n_episodes = self.info.episodes.episodes if self.info.episodes is not None else 0
-            max_bytes, max_ids = split_limits(sum(len(k.rows) for k in self._kinds.values())
-                                              + n_episodes)
+            max_bytes, max_ids = dataset_split_limits(self.info)
             split = self.loc.checked(rel, functools.partial(
                 read_split, expected_sha256=self.info.splits[name], max_bytes=max_bytes,
                 max_ids=max_ids))

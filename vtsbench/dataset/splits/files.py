@@ -6,10 +6,14 @@ from __future__ import annotations
 import hashlib
 from collections.abc import Iterable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ...errors import VtsError
-from ..format.layout import split_file_name
+from ..format.layout import KINDS, split_file_name
 from ..format.records import SplitFile, schema_errors
+
+if TYPE_CHECKING:
+    from ..format.info import DatasetInfo
 
 #: A split file may list each sample of the dataset at most once, and hold at most 1 MiB plus
 #: 512 bytes a sample (an id is at most 160 characters).
@@ -20,6 +24,13 @@ SPLIT_BYTES_PER_SAMPLE = 512
 def split_limits(n_samples: int) -> tuple[int, int]:
     """(bytes, ids) a split file of a dataset of n_samples samples may hold."""
     return SPLIT_BASE_BYTES + SPLIT_BYTES_PER_SAMPLE * n_samples, n_samples
+
+
+def dataset_split_limits(info: DatasetInfo) -> tuple[int, int]:
+    """`split_limits` of a dataset from its info.json, one size for the loader and verify: its
+    samples of every kind plus its episodes (a split lists samples of one kind, or episodes)."""
+    n = sum(getattr(info.counts, kind).samples for kind in KINDS)
+    return split_limits(n + (info.episodes.episodes if info.episodes is not None else 0))
 
 
 def write_splits(folder: str | Path, splits: Iterable[SplitFile]) -> dict[str, str]:

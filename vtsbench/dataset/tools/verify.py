@@ -19,7 +19,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -40,6 +40,9 @@ from ..format.layout import (
 from ..format.problems import SHOWN
 from ..format.records import SPLIT_NAME
 from .verify_video import check_videos
+
+if TYPE_CHECKING:
+    import pyarrow as pa
 
 
 @dataclass
@@ -139,6 +142,13 @@ def check_index(root: Path, info: DatasetInfo, report: VerifyReport) -> dict[str
     """Both indexes as the loader reads and checks them (`read_index`; `index_problems`:
     schema, rows 0..N-1 in order, objects and class_idx, values), ids unique across kinds,
     counts against info.json; returns the tables that could be read, by kind."""
+    return _check_index(root, info, report)[0]
+
+
+def _check_index(root: Path, info: DatasetInfo, report: VerifyReport
+                 ) -> tuple[dict[str, Any], pa.Table | None]:
+    """`check_index`, and index/episodes.parquet as it read it (None: no episodes, or a file
+    that could not be read, reported here) for the checks after it."""
     from ..format.index import counts_problems, ids_problems, index_problems, read_index
 
     out: dict[str, Any] = {}
@@ -156,22 +166,24 @@ def check_index(root: Path, info: DatasetInfo, report: VerifyReport) -> dict[str
     report.problems += [f"index: {b}" for b in ids_problems(out)]
     report.problems += [f"{INFO_PATH}: {b}" for b in counts_problems(info, out)]
     report.samples = sum(len(t) for t in out.values())
+    episodes: pa.Table | None = None
     if info.episodes is not None:  # format 1.2: the episode and frame indexes
         from ..format.episodes import episodes_problems, read_table
         from ..read.episodes import store_table
 
         try:
-            tables = [read_table(root, which) for which in ("episodes", "frames")]
+            episodes = read_table(root, "episodes")
+            frames = read_table(root, "frames")
         except VtsError as e:
             report.problems.append(str(e).replace(f"{root}/", "", 1))
-            return out
-        bad = episodes_problems(*tables, info)
+            return out, episodes
+        bad = episodes_problems(episodes, frames, info)
         report.problems += [f"{EPISODES_INDEX}: {b}" for b in bad]
         if not bad:
-            out[EPISODES] = store_table(*tables)  # ids of the frames: `<episode id>/<frame>`
+            out[EPISODES] = store_table(episodes, frames)  # frame ids: `<episode id>/<frame>`
             if info.views:
-                report.problems += _view_problems(info, out, tables[0])
-    return out
+                report.problems += _view_problems(info, out, episodes)
+    return out, episodes
 
 
 def _view_problems(info: DatasetInfo, index: dict[str, Any], episodes: Any) -> list[str]:
@@ -186,20 +198,21 @@ def _view_problems(info: DatasetInfo, index: dict[str, Any], episodes: Any) -> l
 
 
 def check_splits(root: Path, info: DatasetInfo, index: dict[str, Any],
-                 report: VerifyReport) -> list[Any]:
+                 report: VerifyReport, episodes: pa.Table | None = None) -> list[Any]:
     """Every split file as the loader checks it (`split_problems`: name, size and id count,
-    schema, ids known, part sizes, leaks), and its sha256 against info.json."""
+    schema, ids known, part sizes, leaks), and its sha256 against info.json. `episodes`:
+    index/episodes.parquet already read (None: read here if a split of episodes needs it)."""
     import hashlib
 
     from ..format.episodes import read_table
     from ..splits.episodes import EPISODE, episode_leaks, split_table
-    from ..splits.files import read_split, split_limits
+    from ..splits.files import dataset_split_limits, read_split
     from ..splits.leaks import split_problems
 
     splits = []
-    episodes: Any = None
+    leak_table: Any = None
     folder = root / SPLITS_DIR
-    max_bytes, max_ids = split_limits(sum(s.get("rgb", (0,))[0] for s in info.shapes.values()))
+    max_bytes, max_ids = dataset_split_limits(info)
     for name, sha in sorted(info.splits.items()):
         rel = split_path(name)
         path = root / rel
@@ -220,13 +233,14 @@ def check_splits(root: Path, info: DatasetInfo, index: dict[str, Any],
             report.problems += [f"{rel}: {b}" for b in bad]
             report.problems += [f"{rel}: leak: {name}: {x}" for x in leaks]
         elif sp.kind == EPISODE and info.episodes is not None:  # splits over episodes
-            if episodes is None:  # read once for every split of episodes
+            if leak_table is None:  # made once for every split of episodes
                 try:
-                    episodes = split_table(read_table(root, "episodes"))
+                    leak_table = split_table(read_table(root, "episodes") if episodes is None
+                                             else episodes)
                 except VtsError:
                     continue  # reported with the indexes
             report.problems += [f"{rel}: leak: {name}: {x}"
-                                for x in episode_leaks(sp, episodes)]
+                                for x in episode_leaks(sp, leak_table)]
     listed = set(info.splits)
     if folder.is_dir():
         extra = [p.name for p in sorted(folder.glob("*.json")) if p.stem not in listed]
@@ -382,10 +396,10 @@ def _verify(root: Path, decode: bool, progress: bool) -> VerifyReport:
             t = bar.add_task("checking", total=len(info.files) + n_shards)
             advance = lambda n: bar.advance(t, n)  # noqa: E731
         check_files(root, info, report, advance)
-        index = check_index(root, info, report)
-        check_splits(root, info, index, report)
+        index, episodes = _check_index(root, info, report)
+        check_splits(root, info, index, report, episodes)
         check_arrays(root, info, index, report, decode, advance)
-        check_videos(root, info, report)  # episodes' RGB stored as video (verify_video.py)
+        check_videos(root, info, report, episodes)  # RGB stored as video (verify_video.py)
     report.problems = _one_kind_line_per_file(report.problems)
     return report
 

@@ -17,24 +17,24 @@ from ..format.episode_video import stored_codec
 from ..format.layout import EPISODES, INFO_PATH, VIDEOS_DIR, episode_video_path
 
 if TYPE_CHECKING:
+    import pyarrow as pa
+
     from ..format.info import DatasetInfo
     from .verify import VerifyReport
 
 
-def check_videos(root: Path, info: DatasetInfo, report: VerifyReport) -> None:
+def check_videos(root: Path, info: DatasetInfo, report: VerifyReport,
+                 episodes: pa.Table | None) -> None:
     """Add the problems of the episodes' videos to the report (nothing for a dataset whose
-    RGB is in Zarr)."""
+    RGB is in Zarr). `episodes`: index/episodes.parquet as the index checks read it; None
+    where it could not be read (reported with the indexes: the videos are not probed)."""
     codec = stored_codec(info)  # (a codec vtsbench cannot read: refused with info.json)
-    if codec is None:
+    if codec is None or episodes is None:
         return
-    from ..format.episodes import read_table
     from ..read.episode_video import check_video_info
     from ..read.video import probe
 
-    try:
-        lengths = read_table(root, "episodes").column("length").to_pylist()
-    except VtsError:
-        return  # reported with the indexes
+    lengths = episodes.column("length").to_pylist()
     size = tuple(info.shapes[EPISODES]["rgb"][1:3])
     wanted = set()
     for k, length in enumerate(lengths):
