@@ -14,6 +14,10 @@ page cache is warm, so this measures decoding, not the disk):
   worker start-up counts) with 0 and --workers workers, at the stored size and resized to
   224x224, as uint8 frames (the default) and with dtype="float32" (the tensors of earlier
   versions, bit for bit: the before of the same run);
+- `view.to_torch("rgbd").loader(batch_size=4, shuffle=True, num_workers=--workers)`: the same
+  batches with the workers' batches written into reused shared memory (a new loader each pass;
+  one loader iterated again, its workers new each pass, its shared memory kept; persistent
+  workers), and what its main process pays to copy a batch out of its slot;
 - `view.to_hf()`, streamed from the Zarr store (rgb, depth, contact as numpy);
 - `datasets.load_dataset(DATASET, "slip_all")` after its cache is built, rows read by index in the
   same shuffled order, without a format (PIL images, made numpy) and with `.with_format("numpy")`,
@@ -118,6 +122,67 @@ def torch_job(view: View, modality: str, size: tuple[int, int] | None, workers: 
     if kept is not None:
         run()
     return run
+
+
+SLOT_MODES = {"new": "new each pass", "again": "one loader, workers new each pass",
+              "persistent": "persistent (a later epoch)"}
+
+
+def slots_job(view: View, workers: int, mode: str) -> Callable[[], int]:
+    """One shuffled pass (batch 4) of view.to_torch("rgbd").loader(...): batches through
+    reused shared memory; mode (SLOT_MODES) "new": a new loader each pass; "again": one
+    loader, iterated again (new workers, its shared memory kept), warmed up; "persistent": one
+    with persistent workers, warmed up."""
+    import torch
+
+    data = view.to_torch("rgbd")
+
+    def loader() -> Any:
+        return data.loader(batch_size=4, shuffle=True, num_workers=workers,
+                           generator=torch.Generator().manual_seed(0),
+                           persistent_workers=mode == "persistent")
+
+    kept = loader() if mode != "new" else None
+
+    def run() -> int:
+        return sum(len(t["sample_id"]) for _x, t in (kept or loader()))
+
+    if kept is not None:
+        run()
+    return run
+
+
+def slot_copy(job: Callable[[], int], nbytes: int, repeats: int = 3) -> tuple[float, ...]:
+    """What the main process of a slot loader pays: (CPU ms and page faults per sample over
+    a pass of `job`, best of repeats; CPU ms and faults per sample to copy a batch of 4
+    samples of nbytes, as rgb and depth, out of a slot, after a first copy)."""
+    import torch
+
+    from vtsbench.dataset.read.torch_loader import InSlot, unpack
+
+    def faults() -> int:
+        return resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+
+    best_cpu, best_faults = float("inf"), float("inf")
+    for _ in range(repeats):
+        c0, f0 = time.process_time(), faults()
+        n = job()
+        best_cpu = min(best_cpu, 1e3 * (time.process_time() - c0) / n)
+        best_faults = min(best_faults, (faults() - f0) / n)
+    ring = torch.UntypedStorage._new_shared(4 * nbytes + 128)
+    ring_np = torch.from_numpy(np.empty(0, np.uint8)).set_(ring, 0, (4 * nbytes + 128,)).numpy()
+    ring_np[:] = 7
+    where = [InSlot(0, np.dtype(np.uint8), (4, nbytes * 3 // 7), (nbytes * 3 // 7, 1)),
+             InSlot(4 * nbytes * 3 // 7 // 64 * 64 + 64, np.dtype(np.float32),
+                    (4, nbytes // 7), (nbytes // 7, 1))]
+    unpack(where, ring)
+    copy_cpu, copy_faults = float("inf"), float("inf")
+    for _ in range(5):
+        c0, f0 = time.process_time(), faults()
+        unpack(where, ring)
+        copy_cpu = min(copy_cpu, 1e3 * (time.process_time() - c0) / 4)
+        copy_faults = min(copy_faults, (faults() - f0) / 4)
+    return best_cpu, best_faults, copy_cpu, copy_faults
 
 
 def hf_row_arrays(row: dict[str, Any], scale_mm: float) -> dict[str, np.ndarray]:
@@ -418,6 +483,13 @@ def run(work: Path, a: argparse.Namespace, size: tuple[int, int]) -> str:
                        + (", persistent (a later epoch)" if keep else ""))
                 jobs[key] = torch_job(view, modality, sz, w, dtype, keep)
                 torch_rows.append((key, base[modality]))
+    slots = hasattr(view.to_torch("rgbd"), "loader")  # earlier versions have no .loader
+    if slots:
+        for mode, text in SLOT_MODES.items():
+            key = (f'`to_torch("rgbd").loader(batch_size=4, shuffle=True, '
+                   f'num_workers={a.workers})`, reused shared memory, {text}')
+            jobs[key] = slots_job(view, a.workers, mode)
+            torch_rows.append((key, base["rgbd"]))
     for name, rows in hf_rows.items():
         jobs[name] = rows_job(rows, scale)
     rates = best(jobs, n, a.repeats)
@@ -450,6 +522,13 @@ def run(work: Path, a: argparse.Namespace, size: tuple[int, int]) -> str:
               f"fallocate; then writing its 4 KB pages; {populated:.1f} ms with the pages "
               f"prefaulted by MADV_POPULATE_WRITE), against {fresh:.1f} ms into fresh "
               f"numpy memory and {reused:.1f} ms into reused memory."]
+    if slots:
+        main_ms, main_faults, copy_ms, copy_faults = slot_copy(jobs[torch_rows[-1][0]], nbytes)
+        lines += ["", f"The main process of `.loader(...)` with {a.workers} persistent workers: "
+                  f"{main_ms:.1f} ms of CPU and {main_faults:.0f} page faults a sample over a "
+                  f"pass; copying a batch out of its slot {copy_ms:.1f} ms a sample "
+                  f"({copy_faults:.0f} page faults: glibc reuses a freed buffer of up to 32 MB, "
+                  f"a larger one, such as a batch's depth, is mapped afresh)."]
     lines += hf_lines
     if a.formats:
         lines += formats_report(view, work, order, a.repeats)

@@ -4,14 +4,18 @@ DataLoader worker, as default_collate would make them), its items views of those
 `default_collate` handing the tensors on instead of stacking the items again (`collate_batch`,
 registered in torch's `default_collate_fn_map`, the documented way to extend it). So a worker
 writes each frame once, into memory the DataLoader sends without a copy; a batch is what
-stacking its items would give, bit for bit. This module imports torch.
+stacking its items would give, bit for bit. Inside `slot_memory` (the reused shared memory of
+`torch_loader`) the batch tensors are taken from a given block instead of a fresh segment. This
+module imports torch.
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextvars import ContextVar
 from typing import Any
 
 import numpy as np
@@ -47,11 +51,55 @@ def put_frames(name: str, src: np.ndarray, dst: np.ndarray) -> None:
         cv2.resize(src[f], (w, h), dst=dst[f], interpolation=how)
 
 
+#: Alignment of the tensors taken from a block of `slot_memory` (a cache line).
+ALIGN = 64
+
+
+class Arena:
+    """A block of memory (`storage` bytes [start, start + nbytes)) that the batch tensors of one
+    `__getitems__` call are taken from in turn, each aligned to ALIGN; `used` counts the bytes
+    asked for, also past the end and without a block (storage None: a probe of the size)."""
+
+    def __init__(self, storage: torch.UntypedStorage | None, start: int = 0,
+                 nbytes: int = 0) -> None:
+        self.storage, self.start, self.end = storage, start, start + nbytes
+        self.used = 0
+
+    def take(self, shape: tuple[int, ...], dtype: np.dtype) -> torch.Tensor | None:
+        """A tensor in the block's next free bytes, or None where it does not fit."""
+        itemsize = np.dtype(dtype).itemsize
+        nbytes = -(-math.prod(shape) * itemsize // ALIGN) * ALIGN
+        at, self.used = self.start + self.used, self.used + nbytes
+        if self.storage is None or at + nbytes > self.end:
+            return None
+        return torch.from_numpy(np.empty(0, dtype)).set_(self.storage, at // itemsize, shape)
+
+
+_ARENA: ContextVar[Arena | None] = ContextVar("vtsbench_batch_arena", default=None)
+
+
+@contextlib.contextmanager
+def slot_memory(arena: Arena) -> Iterator[Arena]:
+    """Within it, `empty` takes the batch tensors from `arena` (where they fit; a fresh tensor
+    as before where not)."""
+    token = _ARENA.set(arena)
+    try:
+        yield arena
+    finally:
+        _ARENA.reset(token)
+
+
 def empty(shape: tuple[int, ...], dtype: np.dtype, shared: bool) -> torch.Tensor:
-    """An uninitialised tensor. `shared`: in shared memory, as default_collate makes a worker's
-    batch, so that the DataLoader sends it to the main process without a copy, its pages
-    faulted in by one call (`prefault`); else numpy's memory, which asks the kernel for huge
-    pages (a fresh 39 MB buffer filled in 5 ms, against 22 ms in torch.empty's 4 KB pages)."""
+    """An uninitialised tensor: from the block of `slot_memory` where one is set and it fits.
+    Else `shared`: in shared memory, as default_collate makes a worker's batch, so that the
+    DataLoader sends it to the main process without a copy, its pages faulted in by one call
+    (`prefault`); else numpy's memory, which asks the kernel for huge pages (a fresh 39 MB
+    buffer filled in 5 ms, against 22 ms in torch.empty's 4 KB pages)."""
+    arena = _ARENA.get()
+    if arena is not None:
+        t = arena.take(shape, dtype)
+        if t is not None:
+            return t
     if not shared:
         return torch.from_numpy(np.empty(shape, dtype))
     nbytes = math.prod(shape) * np.dtype(dtype).itemsize

@@ -25,6 +25,7 @@ from torch.utils.data import Dataset
 from ...errors import VtsError
 from ...labels import DIRECTION_NAMES, MIRROR_X, STATES
 from .torch_batch import batch_of, batch_tensors, in_worker, item_at, put_frames
+from .torch_loader import Loadable
 
 if TYPE_CHECKING:
     from .episodes import Windows
@@ -95,7 +96,7 @@ def as_float(x: Any, device: Any = None) -> torch.Tensor:
     return x.float().div_(255) if x.dtype == torch.uint8 else x.float()
 
 
-class TorchView(Dataset):
+class TorchView(Loadable, Dataset):
     """(tensor, target) items of a view.
 
     dtype "uint8" (default): rgb uint8 as C x H x W, depth float32 mm as one channel, rgbd a
@@ -112,6 +113,9 @@ class TorchView(Dataset):
     or a Video for a sequence, and the depth and contact targets are tv_tensors.Mask, so a
     torchvision.transforms.v2 transform moves them together) and returns it; then `transform`
     gets the tensor alone and `target_transform` the target.
+
+    `loader(batch_size, shuffle=..., num_workers=...)`: the DataLoader's batches, its workers'
+    passed through reused shared memory (`torch_loader`).
     """
 
     def __init__(self, view: View, modality: str = "rgb", size: Sequence[int] | None = None,
@@ -380,7 +384,7 @@ class HorizontalFlip:
         return out
 
 
-class TorchWindows(Dataset):
+class TorchWindows(Loadable, Dataset):
     """(tensor, target) items of episode windows (`ds.episodes.windows(...).to_torch()`).
 
     x: rgb uint8 T x C x H x W, depth float32 mm T x 1 x H x W, rgbd a dict of the two, `size`
@@ -389,7 +393,8 @@ class TorchWindows(Dataset):
     target: episode_id, episode_index, and T each: frame_index, timestamps (float64), state and
     direction (int64, -1 where unknown), pad_mask, and the arrays named in `targets` ("depth" in
     mm, "contact" bool) as T x H x W. A batch (`__getitems__`) is one `Windows.read` call (each
-    frame read once however many of its windows hold it). Transforms as in TorchView."""
+    frame read once however many of its windows hold it). Transforms and `loader` as in
+    TorchView."""
 
     def __init__(self, windows: Windows, modality: str = "rgb",
                  size: Sequence[int] | None = None,
