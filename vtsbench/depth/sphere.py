@@ -35,6 +35,8 @@ from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
+from .imprint import TEXTURE_LEVEL, ring_contrast
+
 
 @dataclass(frozen=True)
 class Rim:
@@ -302,6 +304,10 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     least-squares fit to the inliers, three times from the new centre. Of the two circles, the
     one with the most edge weight on it (`edge_support`) among those whose disc mostly shows a
     change is kept (the component's unless the other has RESTART_GAIN times its edge weight).
+    When neither start gives a circle (a background taken under another light leaves a texture
+    in which only the imprint's brightest lobe stands out), the disc search is run again at
+    `imprint.TEXTURE_LEVEL`, and its circle is kept only when its rim stands RING_Z_MIN robust
+    deviations of the texture out (`imprint.ring_contrast`).
     ball_px: the ball radius in pixels (without it, any radius from
     min_radius_px). start: a first guess (x, y, r) instead of the two starts (what calibration
     retries with when the first circle fails its check). restarts: fit again from 8 starts
@@ -312,21 +318,36 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
         sigma = default_sigma(image.shape[:2])
     m = change_map(image, background, sigma, markers=True)
     rr = radius_range(ball_px, min_radius_px, m.shape)
+    textured = False
     if start is not None:
         found = _fit_rays(m, *start, sigma, rr)
     else:
         found = _pick(m, [_component_fit(m, sigma, min_radius_px, rr), _search_fit(m, sigma, rr)],
                       sigma)
-    return _best_of_starts(m, found, sigma, min_radius_px, ball_px) if restarts else found
+        if found is None:
+            found = _search_fit(m, sigma, rr, TEXTURE_LEVEL)
+            textured = True
+    if restarts:
+        found = _best_of_starts(m, found, sigma, min_radius_px, ball_px)
+    if textured and found is not None and ring_contrast(m, found) < RING_Z_MIN:
+        return None
+    return found
 
 
-def _search_fit(m: np.ndarray, sigma: float, rr: tuple[float, float]
+#: A circle found only at the texture level (`imprint.TEXTURE_LEVEL`) is kept when the change
+#: inside its rim stands this many robust deviations of the texture above the change outside
+#: it (`imprint.ring_contrast`).
+RING_Z_MIN = 3.5
+
+
+def _search_fit(m: np.ndarray, sigma: float, rr: tuple[float, float], level: float = 5.0
                 ) -> tuple[float, float, float] | None:
-    """The circle fitted from the disc that best covers the change (`imprint.disc_search`,
-    radii up to 1.6 times the plausible range: the change's support takes in the skirt)."""
+    """The circle fitted from the disc that best covers the change (`imprint.disc_search` at
+    `level`, radii up to 1.6 times the plausible range: the change's support takes in the
+    skirt)."""
     from .imprint import disc_search
 
-    found = disc_search(m, (rr[0], 1.6 * rr[1]))
+    found = disc_search(m, (rr[0], 1.6 * rr[1]), level=level)
     if found is None or found[3] < 0.25 * math.pi * rr[0] ** 2:
         return None
     x, y, r, _ = found
