@@ -4,7 +4,6 @@ very batches that stacking the items one by one gives, shuffled, with 0 and 2 wo
 
 from __future__ import annotations
 
-import math
 import pickle
 from pathlib import Path
 from typing import Any
@@ -13,6 +12,7 @@ import numpy as np
 import pytest
 
 import vtsbench
+from tests.fixtures.batches import assert_same as _same
 from tests.fixtures.episodes import takes, write_takes
 from vtsbench.dataset.read.loader import VtsDataset
 
@@ -28,24 +28,6 @@ def ds(vts_dataset: Path) -> VtsDataset:
 @pytest.fixture(scope="module")
 def eps(tmp_path_factory: pytest.TempPathFactory) -> VtsDataset:
     return vtsbench.load(write_takes(tmp_path_factory.mktemp("eps") / "ds", takes(depth=True)))
-
-
-def _same(a: Any, b: Any, where: str = "batch") -> None:
-    """The same structure, types, dtypes, shapes, strides and values (NaN equal to NaN)."""
-    assert type(a) is type(b), (where, type(a), type(b))
-    if isinstance(a, torch.Tensor):
-        assert (a.dtype, a.shape, a.stride()) == (b.dtype, b.shape, b.stride()), where
-        torch.testing.assert_close(a, b, rtol=0, atol=0, equal_nan=True, msg=where)
-    elif isinstance(a, dict):
-        assert list(a) == list(b), where
-        for k in a:
-            _same(a[k], b[k], f"{where}.{k}")
-    elif isinstance(a, list | tuple):
-        assert len(a) == len(b), where
-        for k, (u, v) in enumerate(zip(a, b, strict=True)):
-            _same(u, v, f"{where}[{k}]")
-    else:
-        assert a == b or (isinstance(a, float) and math.isnan(a) and math.isnan(b)), where
 
 
 def _datasets(ds: VtsDataset, eps: VtsDataset) -> list[Any]:
