@@ -74,9 +74,11 @@ results: $(VENV)/.installed
 		--leaderboards leaderboards --out docs/results.md --profile results \
 		--summary $(PAPER)/results.json $(if $(WEIGHTS),--pretrained $(WEIGHTS))
 
-## test: install the dev extras and run the test suite on both cores
+## test: install the dev extras and run the test suite on both cores (one OpenBLAS thread in
+## each of the two test workers: with a BLAS thread pool in each, a test once sat 7 minutes in
+## one sgemm, its main thread spinning while the pool's threads slept)
 test: $(VENV)/.installed
-	$(BIN)/python -m pytest -q -n 2
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -n 2
 
 lint: $(VENV)/.installed
 	$(BIN)/ruff check vtsbench tests benchmarks
