@@ -6,7 +6,9 @@ in a temporary folder: as recorded, rotated by 90 degrees (portrait <-> landscap
 rescaled by 0.5, 1.5 and 2 (the scale in mm/px follows), JPEG-compressed at quality 75, and with
 a real marker grid pasted (the marker layer of the first frame of an incipient-slip video: the
 frame over its median of 31 px, resized to the set's scale at 0.0634 mm/px, multiplied onto the
-presses and the background). Per set and variant, one row: presses used and dropped (`calibrate
+presses and the background), the colour channels swapped (RGB read as BGR), a darker exposure
+(0.6 times the light through an 8-bit gamma of 2.2), and rotated, with markers, then
+JPEG-compressed, in turn. Per set and variant, one row: presses used and dropped (`calibrate
 --circles detect`), the detected circles against the labels (centre distance, median and share
 within 3 px of the variant's pixels, and in the set's own pixels; radius error after the 0.97 R
 clamp both get, median and share within 10 %; the share within both), and the held-out
@@ -38,7 +40,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from circles_real import REAL, held_out_rmse
 
-VARIANTS = ("base", "rot90", "mirror", "x0.5", "x1.5", "x2", "jpeg75", "markers")
+VARIANTS = ("base", "rot90", "mirror", "x0.5", "x1.5", "x2", "jpeg75", "markers", "swap", "dim",
+            "rot90-markers-jpeg75")
 MARKER_MM_PER_PX = 0.0634  # GelSight Mini at 320x240 (gelsight_mini_objects/gsmini.yaml)
 TAXIM_MM_PER_PX, TAXIM_BALL_MM = 0.1245, 2.0
 DIGIT_MM_PER_PX, DIGIT_BALL_MM = 1 / 21.09, 3.0
@@ -135,6 +138,18 @@ def variant(s: PressSet, how: str, layer: np.ndarray | None) -> PressSet | None:
             return cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
 
         return s.map(jpeg, lambda c, hw: c)
+    if how == "swap":  # the colour channels in the other order (RGB read as BGR)
+        return s.map(lambda a: np.ascontiguousarray(a[..., ::-1]), lambda c, hw: c)
+    if how == "dim":  # a darker exposure: 0.6 times the light, then an 8-bit camera's gamma
+        return s.map(lambda a: (255 * (0.6 * (a / 255.0) ** 2.2) ** (1 / 2.2)).round()
+                     .astype(np.uint8), lambda c, hw: c)
+    if "-" in how:  # several in turn
+        for part in how.split("-"):
+            v = variant(s, part, layer)
+            if v is None:
+                return None
+            s = v
+        return s
     if how == "markers":
         if layer is None:
             return None

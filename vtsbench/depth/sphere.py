@@ -304,10 +304,11 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     least-squares fit to the inliers, three times from the new centre. Of the two circles, the
     one with the most edge weight on it (`edge_support`) among those whose disc mostly shows a
     change is kept (the component's unless the other has RESTART_GAIN times its edge weight).
-    When neither start gives a circle (a background taken under another light leaves a texture
-    in which only the imprint's brightest lobe stands out), the disc search is run again at
-    `imprint.TEXTURE_LEVEL`, and its circle is kept only when its rim stands RING_Z_MIN robust
-    deviations of the texture out (`imprint.ring_contrast`).
+    When neither start gives a circle whose rim stands RING_Z_MIN robust deviations out of the
+    change around it (`imprint.ring_contrast`; a background taken under another light leaves a
+    texture in which only the imprint's brightest lobe stands out, and a circle fitted to the
+    texture does not pass), the disc search is run again at `imprint.TEXTURE_LEVEL`, and its
+    circle replaces the first only when its rim does pass.
     ball_px: the ball radius in pixels (without it, any radius from
     min_radius_px). start: a first guess (x, y, r) instead of the two starts (what calibration
     retries with when the first circle fails its check). restarts: fit again from 8 starts
@@ -318,19 +319,23 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
         sigma = default_sigma(image.shape[:2])
     m = change_map(image, background, sigma, markers=True)
     rr = radius_range(ball_px, min_radius_px, m.shape)
-    textured = False
     if start is not None:
         found = _fit_rays(m, *start, sigma, rr)
+        if restarts:
+            found = _best_of_starts(m, found, sigma, min_radius_px, ball_px)
     else:
         found = _pick(m, [_component_fit(m, sigma, min_radius_px, rr), _search_fit(m, sigma, rr)],
                       sigma)
-        if found is None:
-            found = _search_fit(m, sigma, rr, TEXTURE_LEVEL)
-            textured = True
-    if restarts:
-        found = _best_of_starts(m, found, sigma, min_radius_px, ball_px)
-    if textured and found is not None and ring_contrast(m, found) < RING_Z_MIN:
-        return None
+        if restarts:
+            found = _best_of_starts(m, found, sigma, min_radius_px, ball_px)
+        if found is None or ring_contrast(m, found) < RING_Z_MIN:
+            # nothing, or a circle whose rim does not stand out (one fitted to a texture): the
+            # disc search at the texture level, kept only when its rim does stand out
+            textured = _search_fit(m, sigma, rr, TEXTURE_LEVEL)
+            if restarts:
+                textured = _best_of_starts(m, textured, sigma, min_radius_px, ball_px)
+            if textured is not None and ring_contrast(m, textured) >= RING_Z_MIN:
+                found = textured
     return found
 
 
