@@ -321,21 +321,19 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     rr = radius_range(ball_px, min_radius_px, m.shape)
     if start is not None:
         found = _fit_rays(m, *start, sigma, rr)
-        if restarts:
-            found = _best_of_starts(m, found, sigma, min_radius_px, ball_px)
     else:
         found = _pick(m, [_component_fit(m, sigma, min_radius_px, rr), _search_fit(m, sigma, rr)],
                       sigma)
+    if restarts:
+        found = _best_of_starts(m, found, sigma, min_radius_px, ball_px)
+    if start is None and (found is None or ring_contrast(m, found) < RING_Z_MIN):
+        # nothing, or a circle whose rim does not stand out (one fitted to a texture): the disc
+        # search at the texture level, kept only when its rim does stand out
+        textured = _search_fit(m, sigma, rr, TEXTURE_LEVEL)
         if restarts:
-            found = _best_of_starts(m, found, sigma, min_radius_px, ball_px)
-        if found is None or ring_contrast(m, found) < RING_Z_MIN:
-            # nothing, or a circle whose rim does not stand out (one fitted to a texture): the
-            # disc search at the texture level, kept only when its rim does stand out
-            textured = _search_fit(m, sigma, rr, TEXTURE_LEVEL)
-            if restarts:
-                textured = _best_of_starts(m, textured, sigma, min_radius_px, ball_px)
-            if textured is not None and ring_contrast(m, textured) >= RING_Z_MIN:
-                found = textured
+            textured = _best_of_starts(m, textured, sigma, min_radius_px, ball_px)
+        if textured is not None and ring_contrast(m, textured) >= RING_Z_MIN:
+            found = textured
     return found
 
 
