@@ -14,6 +14,7 @@ import pytest
 from typer.testing import CliRunner
 
 import vtsbench
+from tests.fixtures.spy import record_calls
 from vtsbench.cli import app
 from vtsbench.errors import VtsError
 from vtsbench.evaluation.result import EvalResult
@@ -246,16 +247,9 @@ def test_eval_reads_and_checks_a_stream_submission_once(takes: tuple[Path, list[
 
     ds, ids = takes
     sub = _write(tmp_path / "sub.jsonl", [_perfect(ds, e) for e in ids])
-    reads = []
-    real = stream.read_stream_submission
-
-    def counted(path: Any) -> Any:
-        reads.append(path)
-        return real(path)
-
-    monkeypatch.setattr(stream, "read_stream_submission", counted)
+    reads = record_calls(monkeypatch, stream, "read_stream_submission")
     res, _, _ = evaluate_submission(sub, ds, "unseen_objects", "test", tmp_path / "ev")
-    assert reads == [sub]
+    assert reads == [((sub,), {})]
     assert (tmp_path / "ev" / "stream_timeline.png").is_file()
     assert res.submission.sha256 == hashlib.sha256(sub.read_bytes()).hexdigest()
     assert res.submission.file == "sub.jsonl"

@@ -10,6 +10,7 @@ from typing import Any
 
 import pytest
 
+from tests.fixtures.spy import record_calls
 from vtsbench.labels import STATES
 from vtsbench.recipes.stream import Source, header, line_errors
 
@@ -32,14 +33,7 @@ def test_the_checkpoint_is_hashed_once_per_file(tmp_path: Path,
 
     ckpt = tmp_path / "checkpoint.safetensors"
     ckpt.write_bytes(b"weights" * 1000)
-    hashed = []
-    real = provenance.sha256_file
-
-    def counted(path: Path) -> str:
-        hashed.append(path)
-        return real(path)
-
-    monkeypatch.setattr(provenance, "sha256_file", counted)
+    hashed = record_calls(monkeypatch, provenance, "sha256_file")
     monitor = FakeMonitor(str(ckpt))
     heads = [header(monitor, Source("video", f"v{k}.avi", 25.0, lambda: iter(())),
                     realtime=False, device="cpu") for k in range(3)]

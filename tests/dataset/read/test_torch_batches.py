@@ -5,29 +5,16 @@ very batches that stacking the items one by one gives, shuffled, with 0 and 2 wo
 from __future__ import annotations
 
 import pickle
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-import vtsbench
 from tests.fixtures.batches import assert_same as _same
-from tests.fixtures.episodes import takes, write_takes
 from vtsbench.dataset.read.loader import VtsDataset
 
 torch = pytest.importorskip("torch")
 from torch.utils.data import DataLoader, default_collate  # noqa: E402
-
-
-@pytest.fixture(scope="module")
-def ds(vts_dataset: Path) -> VtsDataset:
-    return vtsbench.load(vts_dataset)
-
-
-@pytest.fixture(scope="module")
-def eps(tmp_path_factory: pytest.TempPathFactory) -> VtsDataset:
-    return vtsbench.load(write_takes(tmp_path_factory.mktemp("eps") / "ds", takes(depth=True)))
 
 
 def _datasets(ds: VtsDataset, eps: VtsDataset) -> list[Any]:
@@ -44,10 +31,11 @@ def _x(batch: Any) -> torch.Tensor:
     return batch[0]["rgb"] if isinstance(batch[0], dict) else batch[0]
 
 
-def test_collate_hands_on_the_batch_tensors(ds: VtsDataset, eps: VtsDataset) -> None:
+def test_collate_hands_on_the_batch_tensors(loaded_dataset: VtsDataset,
+                                            loaded_takes: VtsDataset) -> None:
     """default_collate of one __getitems__ call: the tensors the frames were written into (no
     second copy), equal to stacking the items; items are plain tuples to their users."""
-    for data in _datasets(ds, eps):
+    for data in _datasets(loaded_dataset, loaded_takes):
         n = len(data)
         items = data.__getitems__([3 % n, 0, n - 1, 3 % n, 1])
         got, want = default_collate(items), default_collate([tuple(i) for i in items])
@@ -59,9 +47,9 @@ def test_collate_hands_on_the_batch_tensors(ds: VtsDataset, eps: VtsDataset) -> 
         assert data.__getitems__([]) == []
 
 
-def test_other_lists_of_items_are_stacked(ds: VtsDataset) -> None:
+def test_other_lists_of_items_are_stacked(loaded_dataset: VtsDataset) -> None:
     """Items reordered, a part of a batch, or changed: collated as tuples, as before."""
-    data = ds.slip.to_torch("rgbd", targets=("depth",))
+    data = loaded_dataset.slip.to_torch("rgbd", targets=("depth",))
     items = data.__getitems__([4, 1, 2])
     for part in (items[::-1], items[:2]):
         _same(default_collate(part), default_collate([tuple(i) for i in part]))
@@ -70,7 +58,7 @@ def test_other_lists_of_items_are_stacked(ds: VtsDataset) -> None:
     got = default_collate(items)
     _same(got, default_collate([tuple(i) for i in items]))
     assert not got[1]["depth"][1].any() and torch.equal(got[0]["rgb"][2], items[2][0]["rgb"])
-    flips = ds.slip.to_torch("rgb", transforms=lambda s: s)  # transforms: plain tuples
+    flips = loaded_dataset.slip.to_torch("rgb", transforms=lambda s: s)  # transforms: plain tuples
     assert all(type(i) is tuple for i in flips.__getitems__([0, 1]))
 
 
@@ -83,11 +71,11 @@ def _probe(batch: list[Any]) -> tuple[Any, bool, bool]:
 
 
 @pytest.mark.parametrize("workers", [0, 2])
-def test_dataloader_batches_are_unchanged(ds: VtsDataset, eps: VtsDataset,
+def test_dataloader_batches_are_unchanged(loaded_dataset: VtsDataset, loaded_takes: VtsDataset,
                                           workers: int) -> None:
     """Shuffled DataLoader batches with 0 and 2 workers: each equal to its items stacked by
     default_collate; in a worker the frames are written into shared memory once."""
-    for data in _datasets(ds, eps):
+    for data in _datasets(loaded_dataset, loaded_takes):
         order = np.random.default_rng(len(data)).permutation(len(data)).tolist()
         loader = DataLoader(data, batch_size=3, sampler=order, num_workers=workers,
                             collate_fn=_probe, timeout=120 if workers else 0)

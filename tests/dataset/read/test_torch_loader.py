@@ -7,15 +7,12 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-import vtsbench
 from tests.fixtures.batches import assert_same as _same
-from tests.fixtures.episodes import takes, write_takes
 from vtsbench.dataset.read.loader import VtsDataset
 
 torch = pytest.importorskip("torch")
@@ -24,16 +21,6 @@ from torch.utils.data import DataLoader  # noqa: E402
 from vtsbench.dataset.read import torch_loader  # noqa: E402
 from vtsbench.dataset.read.torch_batch import Arena, empty, slot_memory  # noqa: E402
 from vtsbench.dataset.read.torch_loader import SlotLoader  # noqa: E402
-
-
-@pytest.fixture(scope="module")
-def ds(vts_dataset: Path) -> VtsDataset:
-    return vtsbench.load(vts_dataset)
-
-
-@pytest.fixture(scope="module")
-def eps(tmp_path_factory: pytest.TempPathFactory) -> VtsDataset:
-    return vtsbench.load(write_takes(tmp_path_factory.mktemp("eps") / "ds", takes(depth=True)))
 
 
 def _same_batches(got: Any, data: Any, **kw: Any) -> None:
@@ -87,10 +74,10 @@ def _datasets(ds: VtsDataset, eps: VtsDataset) -> list[Any]:
             wins.to_torch("rgb", size=(12, 16))]
 
 
-def test_batches_are_the_dataloaders(ds: VtsDataset, eps: VtsDataset) -> None:
+def test_batches_are_the_dataloaders(loaded_dataset: VtsDataset, loaded_takes: VtsDataset) -> None:
     """Shuffled, 2 workers, a last partial batch: the DataLoader's batches bit for bit, as
     ordinary tensors copied out of the slots; the same with drop_last."""
-    for data in _datasets(ds, eps):
+    for data in _datasets(loaded_dataset, loaded_takes):
         kw = _seeded(batch_size=4, shuffle=True, num_workers=2)
         loader = data.loader(**kw)
         assert isinstance(loader, SlotLoader) and len(data) % 4 != 0
@@ -103,10 +90,10 @@ def test_batches_are_the_dataloaders(ds: VtsDataset, eps: VtsDataset) -> None:
         _same_batches(data.loader(**kw), data, **_seeded(**kw))
 
 
-def test_persistent_workers_keep_their_slots_across_epochs(ds: VtsDataset) -> None:
+def test_persistent_workers_keep_their_slots_across_epochs(loaded_dataset: VtsDataset) -> None:
     """Persistent workers: every epoch the persistent DataLoader's, also after epochs left
     early (their unconsumed tasks' permits given back, else the fourth would wait forever)."""
-    data = ds.slip.to_torch("rgbd", targets=("depth",))
+    data = loaded_dataset.slip.to_torch("rgbd", targets=("depth",))
     kw: dict[str, Any] = dict(batch_size=2, shuffle=True, num_workers=2,
                               persistent_workers=True)
     loader = data.loader(**_seeded(**kw))
@@ -125,14 +112,14 @@ def test_persistent_workers_keep_their_slots_across_epochs(ds: VtsDataset) -> No
 
 @pytest.mark.filterwarnings("ignore:This DataLoader will create")
 @pytest.mark.parametrize("extra", [1, -1])
-def test_slow_consumer_and_many_workers_do_not_deadlock(ds: VtsDataset, extra: int,
+def test_slow_consumer_and_many_workers_do_not_deadlock(loaded_dataset: VtsDataset, extra: int,
                                                         monkeypatch: pytest.MonkeyPatch
                                                         ) -> None:
     """Batches of 1 through 4 workers and a consumer slower than the workers: every batch, in
     order, with 2 slots a worker for its prefetch of 1, and with a single slot (workers then
     wait for the consumer at every batch)."""
     monkeypatch.setattr(torch_loader, "EXTRA_SLOTS", extra)
-    data = ds.slip.to_torch("rgb", size=(16, 16))
+    data = loaded_dataset.slip.to_torch("rgb", size=(16, 16))
     kw = _seeded(batch_size=1, shuffle=True, num_workers=4, prefetch_factor=2 - extra)
 
     def slow() -> list[Any]:
@@ -146,11 +133,11 @@ def test_slow_consumer_and_many_workers_do_not_deadlock(ds: VtsDataset, extra: i
     _same_batches(got, data, **_seeded(batch_size=1, shuffle=True))
 
 
-def test_early_exit_does_not_hang(ds: VtsDataset) -> None:
+def test_early_exit_does_not_hang(loaded_dataset: VtsDataset) -> None:
     """A break after one batch, an exception in the consumer, an iterator dropped: each
     returns in well under a second (torch waits 5 s for each blocked worker), and the loader
     gives whole epochs after."""
-    data = ds.slip.to_torch("rgbd")
+    data = loaded_dataset.slip.to_torch("rgbd")
     loader = data.loader(batch_size=1, num_workers=2, prefetch_factor=1)
     t0 = time.perf_counter()
     for _b in loader:
@@ -170,10 +157,10 @@ def test_early_exit_does_not_hang(ds: VtsDataset) -> None:
     _same_batches(_within(60, lambda: list(loader)), data, batch_size=1)
 
 
-def test_an_error_in_a_worker_ends_the_pass_at_once(ds: VtsDataset) -> None:
+def test_an_error_in_a_worker_ends_the_pass_at_once(loaded_dataset: VtsDataset) -> None:
     """A read failing in a worker: its error in the main process, the workers ended at once,
     the slot it took free again (the next pass whole); one pass at a time."""
-    data = ds.slip.to_torch("rgb", size=(16, 16))
+    data = loaded_dataset.slip.to_torch("rgb", size=(16, 16))
     loader = data.loader(batch_size=2, num_workers=2, prefetch_factor=1)
     read = data.__getitems__
 
@@ -197,17 +184,18 @@ def test_an_error_in_a_worker_ends_the_pass_at_once(ds: VtsDataset) -> None:
     _same_batches(_within(60, lambda: [next(second), *second]), data, batch_size=2)
 
 
-def test_plain_dataloader_where_slots_do_not_apply(ds: VtsDataset, eps: VtsDataset) -> None:
+def test_plain_dataloader_where_slots_do_not_apply(loaded_dataset: VtsDataset,
+                                                   loaded_takes: VtsDataset) -> None:
     """No workers, transforms, dtype="float32": a plain DataLoader (outputs of any shape),
     with the same batches."""
-    view = ds.slip
+    view = loaded_dataset.slip
     cases = [view.to_torch("rgbd").loader(batch_size=2),
              view.to_torch("rgb", transforms=lambda s: s).loader(batch_size=2, num_workers=2),
              view.to_torch("rgb", transform=lambda x: x[:, :1]).loader(num_workers=2),
              view.to_torch("rgb", target_transform=lambda t: t["class_idx"]).loader(
                  num_workers=2),
              view.to_torch("rgb", dtype="float32").loader(batch_size=2, num_workers=2),
-             eps.episodes.windows(length=3).to_torch("rgb", dtype="float32").loader(
+             loaded_takes.episodes.windows(length=3).to_torch("rgb", dtype="float32").loader(
                  num_workers=2)]
     assert all(type(c) is DataLoader for c in cases)
     data = view.to_torch("rgb", size=(10, 12), transform=lambda x: x[:, :1])
@@ -216,19 +204,19 @@ def test_plain_dataloader_where_slots_do_not_apply(ds: VtsDataset, eps: VtsDatas
         view.to_torch("rgb").loader(persistent_workers=True)
 
 
-def test_a_batch_past_its_slot_goes_as_before(ds: VtsDataset,
+def test_a_batch_past_its_slot_goes_as_before(loaded_dataset: VtsDataset,
                                               monkeypatch: pytest.MonkeyPatch) -> None:
     """Slots too small (a wrong probe): the tensors that do not fit go through torch's shared
     memory as a plain DataLoader's, the batches unchanged."""
     monkeypatch.setattr(torch_loader, "item_bytes", lambda data: 64)
-    data = ds.slip.to_torch("rgbd", targets=("depth",))
+    data = loaded_dataset.slip.to_torch("rgbd", targets=("depth",))
     kw = _seeded(batch_size=2, shuffle=True, num_workers=2)
     _same_batches(data.loader(**kw), data, **_seeded(**kw))
 
 
-def test_spawn_workers(ds: VtsDataset) -> None:
+def test_spawn_workers(loaded_dataset: VtsDataset) -> None:
     """The spawn start method: the rings and semaphores reach the workers pickled."""
-    data = ds.slip.to_torch("rgb", size=(12, 16), targets=("contact",))
+    data = loaded_dataset.slip.to_torch("rgb", size=(12, 16), targets=("contact",))
     got = _within(300, lambda: list(data.loader(batch_size=4, num_workers=1,
                                                 multiprocessing_context="spawn")))
     _same_batches(got, data, batch_size=4)
