@@ -7,8 +7,10 @@ rescaled by 0.5, 1.5 and 2 (the scale in mm/px follows), JPEG-compressed at qual
 a real marker grid pasted (the marker layer of the first frame of an incipient-slip video: the
 frame over its median of 31 px, resized to the set's scale at 0.0634 mm/px, multiplied onto the
 presses and the background), the colour channels swapped (RGB read as BGR), a darker exposure
-(0.6 times the light through an 8-bit gamma of 2.2), and rotated, with markers, then
-JPEG-compressed, in turn. Per set and variant, one row: presses used and dropped (`calibrate
+(0.6 times the light through an 8-bit gamma of 2.2), rotated, with markers, then
+JPEG-compressed, in turn, and with markers that move: the grid moved outward in each labelled
+contact as a gel flows under a press (FLOW_AT_RIM of the radius at the rim), alone and rotated
+then JPEG-compressed. Per set and variant, one row: presses used and dropped (`calibrate
 --circles detect`), the detected circles against the labels (centre distance, median and share
 within 3 px of the variant's pixels, and in the set's own pixels; radius error after the 0.97 R
 clamp both get, median and share within 10 %; the share within both), and the held-out
@@ -41,7 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from circles_real import REAL, held_out_rmse
 
 VARIANTS = ("base", "rot90", "mirror", "x0.5", "x1.5", "x2", "jpeg75", "markers", "swap", "dim",
-            "rot90-markers-jpeg75")
+            "rot90-markers-jpeg75", "moved", "rot90-moved-jpeg75")
 MARKER_MM_PER_PX = 0.0634  # GelSight Mini at 320x240 (gelsight_mini_objects/gsmini.yaml)
 TAXIM_MM_PER_PX, TAXIM_BALL_MM = 0.1245, 2.0
 DIGIT_MM_PER_PX, DIGIT_BALL_MM = 1 / 21.09, 3.0
@@ -153,14 +155,53 @@ def variant(s: PressSet, how: str, layer: np.ndarray | None) -> PressSet | None:
     if how == "markers":
         if layer is None:
             return None
-        h, w = next(iter(s.images.values())).shape[:2]
-        k = MARKER_MM_PER_PX / s.mm_per_px
-        big = cv2.resize(layer, (max(w, round(layer.shape[1] * k)),
-                                 max(h, round(layer.shape[0] * k))), interpolation=cv2.INTER_AREA)
-        lay = big[:h, :w, None]
+        lay = _marker_grid(s, layer)[..., None]
         return s.map(lambda a: np.clip(a * lay, 0, 255).round().astype(np.uint8),
                      lambda c, hw: c)
+    if how == "moved":  # markers that move outward in each labelled contact, as a gel flows
+        if layer is None:
+            return None
+        grid = _marker_grid(s, layer)
+        imgs = {k: np.clip(a * flowed(grid, s.labels.get(k))[..., None], 0, 255).round()
+                .astype(np.uint8) for k, a in s.images.items()}
+        return PressSet(s.name, imgs, None if s.bg is None else
+                        np.clip(s.bg * grid[..., None], 0, 255).round().astype(np.uint8),
+                        s.labels, s.mm_per_px, s.ball_mm, s.factor, s.fwd)
     raise SystemExit(f"unknown variant {how!r} (use {', '.join(VARIANTS)})")
+
+
+def _marker_grid(s: PressSet, layer: np.ndarray) -> np.ndarray:
+    """The real marker grid at the set's scale and size (the dots keep their size in mm)."""
+    import cv2
+
+    h, w = next(iter(s.images.values())).shape[:2]
+    k = MARKER_MM_PER_PX / s.mm_per_px
+    big = cv2.resize(layer, (max(w, round(layer.shape[1] * k)),
+                             max(h, round(layer.shape[0] * k))), interpolation=cv2.INTER_AREA)
+    return big[:h, :w]
+
+
+#: Outward flow of the gel at the contact's rim, as a share of the contact radius (an assumed
+#: size: the real marker videos mix shear into every press, so it is not measured from them).
+FLOW_AT_RIM = 0.1
+
+
+def flowed(grid: np.ndarray, circle: Label | None) -> np.ndarray:
+    """The marker grid with its dots moved outward in the contact `circle` (x, y, r px): by
+    FLOW_AT_RIM r times rho / r inside, falling as (r / rho)^2 outside; unmoved without one."""
+    import cv2
+
+    if circle is None:
+        return grid
+    x, y, r = circle
+    h, w = grid.shape
+    yy, xx = np.mgrid[:h, :w].astype(np.float32)
+    dx, dy = xx - x, yy - y
+    rho = np.maximum(np.hypot(dx, dy), 1e-3)
+    u = FLOW_AT_RIM * r * np.where(rho <= r, rho / r, (r / rho) ** 2)
+    # Inverse map: a pixel shows the dot that sat u closer to the centre.
+    return cv2.remap(grid, xx - u * dx / rho, yy - u * dy / rho, cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REFLECT)
 
 
 def write(s: PressSet, folder: Path) -> tuple[Path, dict]:

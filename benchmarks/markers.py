@@ -5,7 +5,9 @@ The marker layer is taken from a real marker gel: the first frame of an incipien
 that the gel between the dots is 1, capped at 1), rescaled to the Taxim GelSight's 0.1245 mm/px
 (the dots keep their size in mm) and multiplied onto every Taxim press and its background. The
 same presses are calibrated without the dots, with them (markers found and filled, the default)
-and with them left in (--markers off), and scored against the sphere at the labelled circles.
+and with them left in (--markers off), and scored against the sphere at the labelled circles;
+and once more with the grid moved outward in each labelled contact as a gel flows under a
+press (circles_variants.FLOW_AT_RIM of the radius at the rim).
 
     .venv/bin/python benchmarks/markers.py [--method poly] [--seeds 3]
 """
@@ -18,6 +20,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from circles_variants import FLOW_AT_RIM, flowed
 from machine import machine  # benchmarks/machine.py: the shared machine line
 
 from vtsbench.depth.calibration import calibrate, taxim_recordings
@@ -66,11 +69,22 @@ def main() -> None:
         for k in ("f0", "imgs"):
             pasted[k] = np.clip(np.rint(pack[k] * layer[..., None]), 0, 255).astype(np.uint8)
         np.savez(tmp / "pasted.npz", **pasted)
+        # the same grid moved outward in each labelled contact, as a gel flows under a press
+        moved = dict(pasted)
+        moved["imgs"] = np.stack([
+            np.clip(np.rint(img * flowed(layer, (float(c[0]), float(c[1]), float(r)))
+                            [..., None]), 0, 255).astype(np.uint8)
+            for img, c, r in zip(pack["imgs"], pack["touch_center"],
+                                 pack["touch_radius"].reshape(-1), strict=True)])
+        np.savez(tmp / "moved.npz", **moved)
         plain = taxim_recordings(TAXIM, tmp / "plain")
         dotted = taxim_recordings(tmp / "pasted.npz", tmp / "dotted")
+        flowing = taxim_recordings(tmp / "moved.npz", tmp / "moved")
         for name, folder, markers in (("without markers", plain, "auto"),
                                       ("pasted markers, found and filled", dotted, "auto"),
-                                      ("pasted markers, left in (--markers off)", dotted, "off")):
+                                      ("pasted markers, left in (--markers off)", dotted, "off"),
+                                      (f"pasted markers moved outward ({FLOW_AT_RIM} r at the "
+                                       "rim), found and filled", flowing, "auto")):
             errs, spec = [], None
             for s in range(args.seeds):
                 run = calibrate(folder, method=args.method, holdout=9, seed=s, device=None,

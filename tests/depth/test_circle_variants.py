@@ -26,9 +26,17 @@ LAYOUTS = {
 }
 
 
-def _markers(h: int, w: int, pitch: float, dot: float) -> np.ndarray:
-    """A grid of dark dots (transmission 0.3 at their centre), soft-edged."""
+def _markers(h: int, w: int, pitch: float, dot: float,
+             flow: tuple[float, float, float, float] | None = None) -> np.ndarray:
+    """A grid of dark dots (transmission 0.3 at their centre), soft-edged; flow (x, y, r, u):
+    the dots moved outward by u px at the rim of the contact (x, y, r), u rho / r inside it and
+    u (r / rho)^2 outside, as a gel flows under a press."""
     yy, xx = np.mgrid[:h, :w].astype(np.float64)
+    if flow is not None:
+        x, y, r, u = flow
+        rho = np.maximum(np.hypot(xx - x, yy - y), 1e-9)
+        s = u * np.where(rho <= r, rho / r, (r / rho) ** 2) / rho
+        xx, yy = xx - s * (xx - x), yy - s * (yy - y)
     dx = (xx - pitch / 3) % pitch
     dy = (yy - pitch / 4) % pitch
     d = np.hypot(np.minimum(dx, pitch - dx), np.minimum(dy, pitch - dy))
@@ -37,10 +45,14 @@ def _markers(h: int, w: int, pitch: float, dot: float) -> np.ndarray:
 
 def render(h: int, w: int, x: float, y: float, r: float, ball_px: float, layout: str, *,
            markers: bool = False, jpeg: int | None = None, seed: int = 0,
-           press: bool = True) -> tuple[np.ndarray, np.ndarray]:
+           press: bool = True, flow: float = 0.0, dot: float = 0.15, pitch: float = 0.45,
+           strength: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """(background, press) RGB uint8: a ball of ball_px pixels pressed to a contact of radius r
     at (x, y), its gel shaded by the layout's lights, whose strength falls off across the frame
-    from the side each comes from; a skirt of a tenth of r outside the rim."""
+    from the side each comes from; a skirt of a tenth of r outside the rim. Markers: dots of
+    dot * ball_px on a grid of pitch * ball_px; flow: the press's dots moved outward by
+    flow * r at the rim (`_markers`). strength: the imprint's colour change scaled by it (a
+    faint imprint: a stiffer gel, weaker lights)."""
     ss = 2
     yy, xx = np.mgrid[:h * ss, :w * ss].astype(np.float64)
     xx, yy = (xx + 0.5) / ss - 0.5, (yy + 0.5) / ss - 0.5
@@ -71,9 +83,12 @@ def render(h: int, w: int, x: float, y: float, r: float, ball_px: float, layout:
     bg = bg.reshape(h, ss, w, ss, 3).mean(axis=(1, 3))
     scale = 200 / max(float(bg.max()), 1.0)
     img, bg = img * scale, bg * scale
+    img = bg + strength * (img - bg)
     if markers:
-        lay = _markers(h, w, pitch=0.45 * ball_px, dot=0.15 * ball_px)[..., None]
-        img, bg = img * lay, bg * lay
+        lay = _markers(h, w, pitch=pitch * ball_px, dot=dot * ball_px)[..., None]
+        moved = _markers(h, w, pitch=pitch * ball_px, dot=dot * ball_px,
+                         flow=(x, y, r, flow * r))[..., None] if flow and press else lay
+        img, bg = img * moved, bg * lay
     rng = np.random.default_rng(seed)
     out = []
     for a in (bg, img):
@@ -103,6 +118,23 @@ def test_detection_holds_across_lights_orientation_markers_and_jpeg(layout, shap
         assert found is not None, (layout, shape)
         cx, cy, cr = found
         assert math.hypot(cx - x, cy - y) < 1.5 and abs(cr / r - 1) < 0.05, (found, (x, y, r))
+
+
+@pytest.mark.parametrize("layout", list(LAYOUTS))
+def test_markers_that_move_under_the_press(layout) -> None:
+    """Large dots (0.45 of the ball across) moved outward in and around a faint contact (0.2 of
+    the rendered change; 0.1 r at the rim, falling off outside): a moved dot leaves a crescent
+    of change where it was and where it went, and filling every dot of either frame keeps
+    those off the circle. Dividing the change by the background's dots instead put every such
+    circle 23-41 px off, 43-71 % too small."""
+    h, w, ball = 320, 240, 46.0
+    for x, y, r in ((0.45 * w + 0.3, 0.55 * h - 0.2, 40.0), (w - 50.4, 52.7, 30.5)):
+        bg, img = render(h, w, x, y, r, ball, layout, markers=True, jpeg=75, flow=0.1,
+                         dot=0.45, pitch=1.1, strength=0.2)
+        found = detect_circle(img, bg, ball_px=ball)
+        assert found is not None, layout
+        assert math.hypot(found[0] - x, found[1] - y) < 1.5 and abs(found[2] / r - 1) < 0.05, \
+            (found, (x, y, r))
 
 
 @pytest.mark.parametrize("layout, dn", [("side3", 50), ("uniform", 25)])

@@ -19,6 +19,7 @@ from vtsbench.depth.calibration import (
     save_calibration,
 )
 from vtsbench.depth.markers import (
+    DOT_MIN_TRANSMISSION,
     detect_markers,
     dot_correction,
     fill_gradients,
@@ -88,34 +89,50 @@ def test_dividing_by_the_dots_transmission_gives_the_difference_without_them(fol
     errs, raws = [], []
     for e in m.entries[:4]:
         im0, im1 = read_image(plain / e.source.path), read_image(marked / e.source.path)
-        gain, fill = dot_correction(im1, spec, bg1, trans)
-        assert not fill[semi].any()  # still dots, none below DOT_MIN_TRANSMISSION: all divided
+        dots = dot_correction(im1, spec, bg1, trans)
+        assert not dots.fill[semi].any()  # still dots, none below DOT_MIN_TRANSMISSION: divided
+        assert dots.offset is None  # none moved
         d0 = colour_difference(im0, bg0, 0.0)
         changed = semi & (np.abs(d0).max(axis=-1) >= 10)  # on a dot, where the press shows
-        errs.append(np.abs(colour_difference(im1, bg1, 0.0, gain=gain) - d0)[changed])
+        errs.append(np.abs(colour_difference(im1, bg1, 0.0, dots=dots) - d0)[changed])
         raws.append(np.abs(colour_difference(im1, bg1, 0.0) - d0)[changed])
     err, raw = np.concatenate(errs), np.concatenate(raws)
     assert err.size > 500
     assert float(np.mean(err)) < 1.5 and float(np.mean(err)) < 0.15 * float(np.mean(raw))
 
 
-def test_a_dot_that_moved_is_filled_whole(folders) -> None:
+@pytest.mark.parametrize("slide", [2, 5])
+def test_a_dot_that_moved_is_followed(folders, slide) -> None:
+    """The left half of the grid slid by `slide` px: 2 px, and its dots are followed (the
+    frame divided by the shifted transmission, the background's dot-free level taken off), so
+    the difference there is the one without dots, not filled; 5 px (more than half a dot), and
+    they are filled whole. The right half stays divided as before."""
     plain, marked, layer = folders
     m = load_manifest(marked)
+    bg0 = read_image(plain / m.sessions[0].background)
     bg1 = read_image(marked / m.sessions[0].background)
     spec = detect_markers(bg1, MM_PER_PX)
     trans = transmission(bg1, spec)
-    im0 = read_image(plain / m.entries[0].source.path).astype(np.float64)
+    im0 = read_image(plain / m.entries[0].source.path)
     w = layer.shape[1]
     moved = layer.copy()
-    moved[:, : w // 2] = np.roll(layer, 2, axis=1)[:, : w // 2]  # the left half slid 2 px
-    frame = np.clip(np.rint(im0 * moved[..., None]), 0, 255).astype(np.uint8)
-    _, fill = dot_correction(frame, spec, bg1, trans)
-    dots = layer < 0.9
-    left, right = dots.copy(), dots.copy()
+    moved[:, : w // 2] = np.roll(layer, slide, axis=1)[:, : w // 2]
+    frame = np.clip(np.rint(im0.astype(np.float64) * moved[..., None]), 0, 255).astype(np.uint8)
+    dots = dot_correction(frame, spec, bg1, trans)
+    spots = (layer < 0.9) | (moved < 0.9)
+    left, right = spots.copy(), spots.copy()
     left[:, w // 2 - 12:] = False  # the dots wholly in either half
     right[:, : w // 2 + 12] = False
-    assert fill[left].mean() > 0.99 and fill[right].mean() < 0.01
+    assert dots.fill[right].mean() < 0.01
+    if slide > spec.diameter_px / 2:  # the background's dots there: filled whole
+        assert dots.fill[left & (layer < 0.9)].mean() > 0.99
+        return
+    core = (moved < DOT_MIN_TRANSMISSION) | (layer < DOT_MIN_TRANSMISSION)
+    assert dots.fill[left & ~core].mean() < 0.05
+    d0 = colour_difference(im0, bg0, 0.0)
+    raw = np.abs(colour_difference(frame, bg1, 0.0) - d0)[left & ~dots.fill]
+    err = np.abs(colour_difference(frame, bg1, 0.0, dots=dots) - d0)[left & ~dots.fill]
+    assert float(err.mean()) < 0.2 * float(raw.mean()), (err.mean(), raw.mean())
 
 
 def test_marker_gel_flat_frame_gives_flat_depth_and_the_file_keeps_the_dots(folders,
@@ -191,7 +208,7 @@ def test_harmonic_fill_is_exact_on_a_linear_field() -> None:
 
 
 def test_build_depth_of_a_marker_gel_is_the_calibrations(folders) -> None:
-    """The dataset build's depth path (DepthMaker) divides and fills the dots as
+    """The dataset build's depth path (DepthMaker) divides, follows and fills the dots as
     Calibration.gradients does; on a plain gel it still takes none of it."""
     import dataclasses
 
@@ -223,8 +240,12 @@ def test_build_depth_of_a_marker_gel_is_the_calibrations(folders) -> None:
                     np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)
                 else:  # unchanged: bit for bit
                     np.testing.assert_array_equal(got, want)
-            if k == 2:  # the slid dots are filled, not divided
-                assert maker.fill[:, : w // 2 - 12].sum() > 200
+            if k == 2:  # the slid dots are followed (gain and offset), not filled
+                assert cal.dots(img).offset is not None
+                assert maker.fill[:, : w // 2 - 12].sum() < 20
+                if importlib.util.find_spec("torch") is not None:  # and so on torch
+                    np.testing.assert_allclose(reconstruct(img, cal, device="cpu"),
+                                               reconstruct(img, cal), atol=2e-4)
             built = depth_and_contact(img[None], cal, "dct")[0][0]
             np.testing.assert_array_equal(built, maker.depth(img, "dct"))
             if has_dots:  # the dots left in the difference show in the depth

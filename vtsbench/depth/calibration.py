@@ -29,6 +29,7 @@ import numpy as np
 from ..errors import VtsError
 from .mapping import METHODS, Mapping, fit_mapping, mapping_from_arrays
 from .markers import (
+    DotCorrection,
     MarkerSpec,
     detect_markers,
     dot_correction,
@@ -101,14 +102,15 @@ class Calibration:
     def difference(self, images: np.ndarray) -> np.ndarray:
         """Colour difference to the background (float32 DN), blurred and clipped as calibrated;
         on a marker gel divided by the dots' transmission (`dots`)."""
-        gain = None if self.markers is None else self.dots(images)[0]
+        dots = None if self.markers is None else self.dots(images)
         return colour_difference(images, self.background, self.blur_px, self.colour_limit_dn,
-                                 gain)
+                                 dots)
 
-    def dots(self, images: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(gain, fill) of frames on a marker gel (`markers.dot_correction`): the factor that
-        divides the dots out of the colour difference, and the pixels to fill in the gradients
-        where that cannot be done (a dot's darkest core, a dot that moved)."""
+    def dots(self, images: np.ndarray) -> DotCorrection:
+        """How the dots of frames on a marker gel come out of the colour difference
+        (`markers.dot_correction`: gain and offset, still dots divided out and moved ones
+        followed, and the pixels to fill in the gradients where that cannot be done: a dot's
+        darkest core, a dot that moved and cannot be followed)."""
         assert self.markers is not None
         trans = self.__dict__.get("_transmission")
         if trans is None:
@@ -124,10 +126,10 @@ class Calibration:
         self._check_shape(images.shape)
         if self.markers is None:
             return self.mapping.relative(self.difference(images), self.zero_map)
-        gain, fill = self.dots(images)
+        dots = self.dots(images)
         diff = colour_difference(images, self.background, self.blur_px, self.colour_limit_dn,
-                                 gain)
-        return fill_gradients(self.mapping.relative(diff, self.zero_map), fill)
+                                 dots)
+        return fill_gradients(self.mapping.relative(diff, self.zero_map), dots.fill)
 
     def gradients_torch(self, images: Any) -> Any:
         """The same on a torch tensor (..., H, W, 3) of RGB values, on the tensor's device."""
@@ -143,8 +145,11 @@ class Calibration:
         diff = images.to(torch.float32) - bg
         fill = None
         if self.markers is not None:  # the dots are found on the CPU
-            gain, fill = self.dots(images.cpu().numpy())
-            diff = diff * torch.from_numpy(np.array(gain, np.float32)).to(dev)
+            dots = self.dots(images.cpu().numpy())
+            fill = dots.fill
+            diff = diff * torch.from_numpy(np.array(dots.gain, np.float32)).to(dev)
+            if dots.offset is not None:
+                diff = diff + torch.from_numpy(dots.offset).to(dev)
         if self.blur_px > 0:
             diff = _blur_torch(diff, self.blur_px)
         diff = diff.clamp(-self.colour_limit_dn, self.colour_limit_dn)
@@ -196,14 +201,14 @@ class Calibration:
 
 
 def colour_difference(images: np.ndarray, background: np.ndarray, blur_px: float,
-                      limit_dn: float = 255.0, gain: np.ndarray | None = None) -> np.ndarray:
-    """images - background in float32 DN, times gain (a marker gel's `Calibration.dots`) when
-    given, Gaussian-blurred by blur_px, clipped to +-limit_dn."""
+                      limit_dn: float = 255.0, dots: DotCorrection | None = None) -> np.ndarray:
+    """images - background in float32 DN, with a marker gel's dots taken out when given
+    (`Calibration.dots`), Gaussian-blurred by blur_px, clipped to +-limit_dn."""
     import cv2
 
     diff = np.asarray(images, np.float32) - background.astype(np.float32)
-    if gain is not None:
-        diff *= gain
+    if dots is not None:
+        dots.apply(diff)
     if blur_px > 0:
         frames = diff.reshape(-1, *diff.shape[-3:])
         for k in range(frames.shape[0]):

@@ -29,9 +29,9 @@ distance to the background over the channels above CONTACT_PARAMS threshold, cle
 resolution by `vtsbench.depth.mask.clean_mask` (OpenCV): 0.8 ms a frame.
 
 On a marker gel (the calibration's `markers`) each frame goes through the calibration's own
-dot handling, as `Calibration.gradients`: `difference` multiplies the difference by the gain
-of `Calibration.dots` before the blur, and `gradients` fills that frame's fill mask
-(`markers.fill_gradients`); the contact is then made from the divided difference. A plain gel
+dot handling, as `Calibration.gradients`: `difference` takes the dots out with the gain and
+offset of `Calibration.dots` before the blur, and `gradients` fills that frame's fill mask
+(`markers.fill_gradients`); the contact is then made from the corrected difference. A plain gel
 takes none of this.
 """
 
@@ -161,9 +161,10 @@ class DepthMaker:
         # the same float32 values as np.subtract(rgb, bg, dtype=np.float32) (uint8 -> float32 is
         # exact), without numpy's buffered casting of mixed types: 0.30 -> 0.23 ms
         cv2.subtract(rgb, self.bg, dst=d, dtype=cv2.CV_32F)
-        if cal.markers is not None:  # as colour_difference: times the gain, then blurred
-            gain, self.fill = cal.dots(rgb)
-            np.multiply(d, gain, out=d)
+        if cal.markers is not None:  # as colour_difference: the dots out, then blurred
+            dots = cal.dots(rgb)
+            self.fill = dots.fill
+            dots.apply(d)
         if cal.blur_px > 0:
             cv2.GaussianBlur(d, (0, 0), cal.blur_px, dst=d, borderType=cv2.BORDER_REFLECT_101)
         np.clip(d, -cal.colour_limit_dn, cal.colour_limit_dn, out=d)

@@ -1,13 +1,16 @@
 """Where a ball press changed the gel's colour, before any edge is looked at: a change map that
 ignores a marker grid, and the disc that best explains the whole change.
 
-A marker gel carries small dark dots on a regular grid. Outside a contact they are the same in
-the press and the background, but their darkness scales every colour change that falls on them,
-so the change map shows holes where a dot lies (and specks where a dot moved).
-`markers.marker_dots` finds the dots in the background (the calibration's dot finder: round
-dark blobs well below their surroundings, many of one size); `change_map` divides the change on
-a dot by the dot's transmission and fills the darkest pixels from their surroundings
-(normalised convolution), so the map describes the imprint, not the grid.
+A marker gel carries small dark dots on a regular grid. Their darkness scales every colour
+change that falls on them, so the change map shows holes where a dot lies; and the gel flows
+under a press, so the dots in and around a contact move, each leaving a crescent of change
+where it was and where it went. The calibration's dot finder (`markers.detect_markers`: round
+dark blobs well below their surroundings, many of one size) finds the dots of the background
+and of the press; `change_map` divides the change on a background dot by the dot's
+transmission, holds the change on every dot of either frame to at most what the gel around it
+shows (`DOT_CLIP`: a moved dot's crescent stands far above it, a still dot's change does not)
+and fills the darkest pixels from around them (normalised convolution), so the map describes
+the imprint, not the grid.
 
 `disc_search` scores discs over the plausible radius range by how well the disc covers the
 changed pixels: +1 for a changed pixel inside it, -1 for an unchanged one. The best disc is the
@@ -40,6 +43,21 @@ def _grey_and_level(background: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 #: the camera, in the press as in the background) down to this transmission; darker pixels
 #: are filled from around them.
 DOT_MIN_GAIN = 0.4
+
+#: On any dot of either frame the change is held to at most DOT_CLIP times the change filled
+#: in from the gel around the dots, plus twice that fill's median (the noise). A dot that moved
+#: under the press leaves a crescent divided up to 2.5 times that stands far above what is
+#: around it; a still dot's divided change does not. Measured on the real sets with a real
+#: marker grid, moved outward by a tenth of the contact radius at the rim or not, and on the
+#: simulator's marker gels (`benchmarks/circles_variants.py`, `circles_sim_variants.py`, in
+#: docs/depth.md): without the hold (division alone) DIGIT moved kept 14 % of centres within
+#: 3 px of the labels and dropped one press (6 rotated with JPEG); at 1.0, 57 % and none (the
+#: two presses under another light rotated with JPEG); at 1.5, 50 % and none (4); at 2, 43 %
+#: and 2 (4). Filling
+#: every dot instead of dividing (the limit of a hold at 0) cost the simulated marker gels the
+#: rim under dots as wide as a contact (detected circles 1.32x the depth error without markers
+#: where 1.0 gives 1.24x and division 1.18x).
+DOT_CLIP = 1.0
 
 
 def _fill(d: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
@@ -88,12 +106,13 @@ def drift(d: np.ndarray) -> np.ndarray:
 
 
 def change_map(image: np.ndarray, background: np.ndarray, sigma: float,
-               dots: tuple[np.ndarray, float] | None = None) -> np.ndarray:
+               dots: tuple[np.ndarray, np.ndarray, float] | None = None) -> np.ndarray:
     """Blurred sum over channels of |image - background - drift| (float32, H x W; `drift`: the
-    smooth light change between the two taken off). With `dots` (`markers.marker_dots` of the
-    background) the change on a dot is divided by the dot's transmission (its grey level over
-    the level around it), and filled from around it where the dot is darker than
-    DOT_MIN_GAIN."""
+    smooth light change between the two taken off). With `dots` (the background's dots, the
+    dots of either frame, both H x W bool grown as `markers.marker_mask` grows them, and their
+    diameter in px) the change on a background dot is divided by the dot's transmission (its
+    grey level over the level around it), held on any dot to DOT_CLIP times the change filled
+    in from around the dots, and filled from around where the dot is darker than DOT_MIN_GAIN."""
     import cv2
 
     sd = image.astype(np.float32) - background.astype(np.float32)
@@ -101,11 +120,15 @@ def change_map(image: np.ndarray, background: np.ndarray, sigma: float,
         sd = sd[..., None]
     d = np.abs(sd - drift(sd)).sum(axis=-1)
     if dots is not None:
-        mask, diameter = dots
+        still, either, diameter = dots
+        sigma_fill = max(1.0, diameter / 4)
         grey, local = _grey_and_level(background)
         gain = np.clip(grey / local, 0.0, 1.0)
-        d = np.where(mask & (gain >= DOT_MIN_GAIN), d / np.maximum(gain, DOT_MIN_GAIN), d)
-        d = _fill(d, mask & (gain < DOT_MIN_GAIN), max(1.0, diameter / 4))
+        d = np.where(still & (gain >= DOT_MIN_GAIN), d / np.maximum(gain, DOT_MIN_GAIN), d)
+        around = _fill(d, either, sigma_fill)
+        hold = DOT_CLIP * around + 2 * float(np.median(around))
+        d = np.where(either, np.minimum(d, hold), d)
+        d = _fill(d, still & (gain < DOT_MIN_GAIN), sigma_fill)
     return cv2.GaussianBlur(d, (0, 0), sigma) if sigma > 0 else d
 
 
@@ -122,11 +145,15 @@ def changed(m: np.ndarray, level: float = 5.0) -> np.ndarray:
     return m > max(med + level * mad, med + 4.0)
 
 
-#: The level (robust deviations) at which `disc_search` counts a pixel as changed on a press
+#: The levels (robust deviations) at which `disc_search` counts a pixel as changed on a press
 #: whose background differs by more than noise (another light: a texture of 11-17 DN robust
 #: deviation where the press's own background gives 2-3.5 DN), where at 5 deviations only the
-#: imprint's brightest lobe stands out.
-TEXTURE_LEVEL = 3.0
+#: imprint's brightest lobe stands out. How far the texture reaches is not known beforehand,
+#: so each is tried and the circle whose rim stands out most is kept (`sphere.detect_circle`).
+#: DIGIT 0016 with a real marker grid: rim contrast 3.9 at 2.5 (its imprint), 3.4 at 3-3.5 (a
+#: circle 5 px off); rotated, the grid moved and JPEG: 3.6 at 2.5, nothing at 3-4; 0017 with
+#: the grid filled instead of divided: 1.1 at 2.5-3 (a texture patch), 4.0 at 3.5-4.
+TEXTURE_LEVELS = (2.5, 3.0, 3.5, 4.0)
 
 
 def disc_search(m: np.ndarray, r_range: tuple[float, float], n_radii: int = 14,

@@ -8,8 +8,8 @@ the flat gel around a press carry their pattern. So:
    against the local median of the grey level (a window of about 2.5 mm, from the scale; a
    sixth of the shorter side without one), round and of one consistent size. It returns a
    `MarkerSpec` (the dots' diameter and the detection settings), or None when the gel shows no
-   such dots. It is the one dot finder: `marker_dots` gives the same dots of a background as a
-   mask, which circle detection divides out of the colour change (`imprint.change_map`).
+   such dots. It is the one dot finder: circle detection takes the dots of the background and of
+   the press (`marker_mask`) out of the colour change (`imprint.change_map`).
 2. `marker_mask(images, spec, background_mask)` finds the dots in each frame (they move with
    the gel under a press) with the same test, keeps the blobs of the calibrated size, joins the
    dots of the background (the colour difference is disturbed there too) and grows the result
@@ -19,10 +19,14 @@ the flat gel around a press carry their pattern. So:
 4. At run time a dot is a multiplier on the light, in the frame as in the background: where
    it has not moved, `dot_correction` divides the colour difference by the dot's transmission
    per channel (`transmission`: the background over its harmonic fill across the dots), so
-   the difference is the one the gel would show without it. Only what cannot be recovered so
-   is masked: a dot's core darker than DOT_MIN_TRANSMISSION, and whole every dot that moved
-   under the press (a Lucas-Kanade step of the frame's transmission against the background's
-   finds it shifted) or shows up away from the background's. `fill_gradients` replaces the
+   the difference is the one the gel would show without it. A dot that moved under the press
+   (a Lucas-Kanade step of the frame's transmission against the background's finds it
+   shifted) is followed: Gauss-Newton on its transmission finds the shift, and over its old
+   and new place the frame is divided by the shifted transmission and the background's
+   dot-free level taken off (`DotCorrection`: gain and offset). Only what cannot be recovered
+   so is masked: a dot's core darker than DOT_MIN_TRANSMISSION, and whole every dot that
+   moved and cannot be followed (more than half a dot, or squeezed: its transmission is not
+   the background's shifted) or shows up away from the background's. `fill_gradients` replaces the
    gradients over that mask by their harmonic fill from the pixels around it (Laplace's
    equation over the hole, a sparse solve), before the Poisson solve.
 
@@ -211,26 +215,84 @@ def transmission(background: np.ndarray, spec: MarkerSpec) -> np.ndarray:
 #: MOVED_PX (one Lucas-Kanade step per dot), or departs from it by more than MOVED_SHARE of
 #: the dot's darkness on average over the dot (a dot squeezed, lost or far away).
 MOVED_PX, MOVED_SHARE = 0.5, 0.25
+#: A moved dot is followed when its shifted transmission leaves at most this share of the
+#: dot's darkness unexplained on average over the dot.
+FOLLOW_SHARE = 0.25
+
+
+@dataclass(frozen=True)
+class DotCorrection:
+    """How a marker gel's dots come out of the colour difference of frames (..., H, W, 3):
+    (frame - background) * gain + offset is the difference the gel would show without them,
+    and fill (..., H, W) marks the pixels where that cannot be done (to fill in the gradients).
+    offset is None where no dot was followed (then it is 0)."""
+
+    gain: np.ndarray
+    fill: np.ndarray
+    offset: np.ndarray | None = None
+
+    def apply(self, diff: np.ndarray) -> np.ndarray:
+        """diff (frame - background, float32) corrected in place, and returned."""
+        np.multiply(diff, self.gain, out=diff)
+        if self.offset is not None:
+            np.add(diff, self.offset, out=diff)
+        return diff
+
+
+def _follow(t_f: np.ndarray, t_bg: np.ndarray, region: np.ndarray, max_px: float
+            ) -> tuple[float, float] | None:
+    """The shift (dx, dy) px that carries a dot of the background transmission patch t_bg onto
+    the frame's t_f (t_f(x) = t_bg(x - shift), least squares over `region`, Gauss-Newton from
+    0), or None when it does not converge within max_px or leaves more than FOLLOW_SHARE of the
+    dot's darkness unexplained (a dot squeezed or lost under the press)."""
+    import cv2
+
+    ph, pw = t_bg.shape
+    yy, xx = np.mgrid[:ph, :pw].astype(np.float32)
+    u = np.zeros(2)
+    dark = float((1.0 - t_bg[region]).mean())
+    r = t_f[region] - t_bg[region]
+    for _ in range(8):
+        t = cv2.remap(t_bg, xx - np.float32(u[0]), yy - np.float32(u[1]), cv2.INTER_LINEAR,
+                      borderMode=cv2.BORDER_REPLICATE)
+        gy, gx = (a[region] for a in np.gradient(t))
+        r = t_f[region] - t[region]
+        a = np.array([[gx @ gx, gx @ gy], [gx @ gy, gy @ gy]])
+        if np.linalg.det(a) < 1e-9:
+            return None
+        du = -np.linalg.solve(a, np.array([gx @ r, gy @ r]))
+        u += du
+        if np.hypot(*u) > max_px:
+            return None
+        if np.hypot(*du) < 0.02:
+            break
+    t = cv2.remap(t_bg, xx - np.float32(u[0]), yy - np.float32(u[1]), cv2.INTER_LINEAR,
+                  borderMode=cv2.BORDER_REPLICATE)
+    if float(np.abs(t_f[region] - t[region]).mean()) > FOLLOW_SHARE * max(dark, 1e-6):
+        return None
+    return float(u[0]), float(u[1])
 
 
 def dot_correction(images: np.ndarray, spec: MarkerSpec, background: np.ndarray,
-                   trans: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(gain (..., H, W, 3) float32, fill (..., H, W) bool) of RGB frames (..., H, W, 3): the
-    colour difference times gain is the difference the gel would show without its dots, and
-    fill marks the pixels where it cannot be recovered so (to fill in the gradients).
+                   trans: np.ndarray) -> DotCorrection:
+    """The correction (`DotCorrection`) of RGB frames (..., H, W, 3) on a marker gel.
 
     A dot multiplies the light of the frame and of the background alike, so where it has not
-    moved the difference is divided by its transmission `trans` (`transmission`). Filled: a
-    dot's core darker than DOT_MIN_TRANSMISSION; whole, every dot of the background that moved
-    (MOVED_PX, MOVED_SHARE) and every dot of the frame away from the background's; all grown
-    by spec.grow_px (the feature blur's reach)."""
+    moved the difference is divided by its transmission `trans` (`transmission`). A dot that
+    moved under the press (MOVED_PX, MOVED_SHARE) is followed: its shift is found by
+    Gauss-Newton on its transmission (`_follow`), and over the dot's old and new place the
+    frame is divided by the shifted transmission and the background's dot-free level taken
+    off (gain and offset). Filled: a dot's core darker than DOT_MIN_TRANSMISSION (where it
+    lies in the frame); whole, every moved dot that cannot be followed and every dot of the
+    frame away from the background's; all grown by spec.grow_px (the feature blur's reach)."""
     import cv2
 
     arr = np.asarray(images)
     lead, (h, w) = arr.shape[:-3], arr.shape[-3:-1]
     frames = arr.reshape(-1, h, w, arr.shape[-1])
     dots = marker_mask(background, spec)  # the grown dots: their rim is dot-free gel
-    n, labels = cv2.connectedComponents(dots.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(dots.view(np.uint8), connectivity=8,
+                                                           ltype=cv2.CV_32S)
     t_bg = trans.mean(axis=-1)
     dark = t_bg < DOT_MIN_TRANSMISSION
     lab = labels[dots]
@@ -240,29 +302,70 @@ def dot_correction(images: np.ndarray, spec: MarkerSpec, background: np.ndarray,
     det = np.maximum(sxx * syy - sxy * sxy, 1e-12)
     g = spec.grow_px
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * g + 1, 2 * g + 1))
+    base_gain = 1.0 / np.maximum(trans, DOT_MIN_TRANSMISSION)
+    level = background.astype(np.float32) / np.maximum(trans, 1e-3)  # the dot-free background
     fill = np.empty((frames.shape[0], h, w), bool)
+    gains: dict[int, np.ndarray] = {}
+    offsets: dict[int, np.ndarray] = {}
+    pad = g + math.ceil(spec.diameter_px / 2)
     for k, f in enumerate(frames):
         grey = f.astype(np.float32).mean(axis=-1)
         t_f = np.ones((h, w), np.float32)
         if dots.any():
-            level = np.maximum(_harmonic(grey[..., None], dots)[:, 0], 1.0)
-            t_f[dots] = grey[dots] / level
+            lev = np.maximum(_harmonic(grey[..., None], dots)[:, 0], 1.0)
+            t_f[dots] = grey[dots] / lev
         dt = (t_f - t_bg)[dots]
         bx, by = np.bincount(lab, dt * tx, n), np.bincount(lab, dt * ty, n)
         shift = np.hypot(syy * bx - sxy * by, sxx * by - sxy * bx) / det
         moved = (shift > MOVED_PX) | \
             (np.bincount(lab, np.abs(dt), n) > MOVED_SHARE * np.maximum(depth, 1e-6))
         moved[0] = False
+        hole_dark = dark.copy()
+        for c in np.flatnonzero(moved):
+            x0, y0, bw, bh = (int(v) for v in stats[c, :4])
+            ys = slice(max(0, y0 - pad), min(h, y0 + bh + pad))
+            xs = slice(max(0, x0 - pad), min(w, x0 + bw + pad))
+            own = labels[ys, xs]
+            u = _follow(t_f[ys, xs], t_bg[ys, xs].astype(np.float32), own == c,
+                        spec.diameter_px / 2)
+            if u is None:
+                continue
+            pw_, ph_ = xs.stop - xs.start, ys.stop - ys.start
+            yy, xx = np.mgrid[:ph_, :pw_].astype(np.float32)
+            mx, my = xx - np.float32(u[0]), yy - np.float32(u[1])
+            ts = cv2.remap(np.ascontiguousarray(trans[ys, xs]), mx, my, cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_REPLICATE)
+            # the dot's old and new place, not a neighbour's
+            here = ((own == c) | ((own == 0) & (ts.mean(axis=-1) < 1.0)))
+            if k not in gains:
+                gains[k] = base_gain.copy()
+                offsets[k] = np.zeros((h, w, arr.shape[-1]), np.float32)
+            gk = 1.0 / np.maximum(ts, DOT_MIN_TRANSMISSION)
+            gains[k][ys, xs][here] = gk[here]
+            offsets[k][ys, xs][here] = (background[ys, xs].astype(np.float32) * gk
+                                        - level[ys, xs])[here]
+            core = hole_dark[ys, xs]
+            core[here] = ts.mean(axis=-1)[here] < DOT_MIN_TRANSMISSION
+            moved[c] = False
         # the frame's dots that touch none of the background's
         fl, fst = cv2.connectedComponentsWithStats(_frame_mask(f, spec).view(np.uint8),
                                                    connectivity=8, ltype=cv2.CV_32S)[1:3]
         touch = np.zeros(fst.shape[0], bool)
         touch[fl[dots]] = True
         touch[0] = True
-        hole = moved[labels] | ~touch[fl] | dark
+        hole = moved[labels] | ~touch[fl] | hole_dark
         fill[k] = cv2.dilate(hole.view(np.uint8), kernel).view(bool)
-    gain = np.broadcast_to(1.0 / np.maximum(trans, DOT_MIN_TRANSMISSION), arr.shape)
-    return gain, fill.reshape(*lead, h, w)
+    if gains:
+        gain = np.empty((frames.shape[0], h, w, arr.shape[-1]), np.float32)
+        offset = np.zeros_like(gain)
+        for k in range(frames.shape[0]):
+            gain[k] = gains.get(k, base_gain)
+            if k in offsets:
+                offset[k] = offsets[k]
+        return DotCorrection(gain.reshape(arr.shape), fill.reshape(*lead, h, w),
+                             offset.reshape(arr.shape))
+    return DotCorrection(np.broadcast_to(base_gain.astype(np.float32), arr.shape),
+                         fill.reshape(*lead, h, w))
 
 
 def fill_gradients(g: np.ndarray, mask: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ down into a skirt whose shape the sphere does not describe. A circle radius of a
 clamped to it before taking sqrt(R^2 - r^2), so every value is finite.
 
 `detect_circle` finds an unlabelled contact from the difference to the no-contact background (the
-smooth light drift taken off, a marker grid divided out: `imprint.change_map`): two first centres,
+smooth light drift taken off, marker dots taken out: `imprint.change_map`): two first centres,
 the largest strong-change component with the lobes beside it and the disc that best covers the
 whole change over the radii the ball can press (`radius_range`, `imprint.disc_search`), then
 sub-pixel edge points along rays from each (the steepest fall of the change past its peak: the
@@ -35,7 +35,7 @@ from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
-from .imprint import TEXTURE_LEVEL, ring_contrast
+from .imprint import TEXTURE_LEVELS, ring_contrast
 
 
 @dataclass(frozen=True)
@@ -140,12 +140,16 @@ def sphere_fields(shape: tuple[int, int], x: float, y: float, r_px: float,
 
 def change_map(image: np.ndarray, background: np.ndarray, sigma: float,
                markers: bool = False) -> np.ndarray:
-    """Blurred sum over channels of |image - background| (float32, H x W); markers: fill the
-    background's marker dots first (`imprint.change_map`)."""
+    """Blurred sum over channels of |image - background| (float32, H x W); markers: when the
+    background shows a marker grid, its dots and the image's are taken out first
+    (`imprint.change_map`)."""
     from .imprint import change_map as imprint_change
-    from .markers import marker_dots
+    from .markers import detect_markers, marker_mask
 
-    return imprint_change(image, background, sigma, marker_dots(background) if markers else None)
+    spec = detect_markers(background, None) if markers else None
+    dots = None if spec is None else (marker_mask(background, spec),
+                                      marker_mask(image, spec, background), spec.diameter_px)
+    return imprint_change(image, background, sigma, dots)
 
 
 def fit_circle(xs: np.ndarray, ys: np.ndarray, weights: np.ndarray | None = None
@@ -295,20 +299,21 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     """The contact circle (x, y, r) px of a ball press, or None when no contact is visible.
 
     The change map (`imprint.change_map`: blurred |image - background|, marker dots of the
-    background filled) gives two starts: the disc over the plausible radii (`radius_range`, from
-    the ball and the scale) that best covers the changed pixels (`imprint.disc_search`: the
-    whole change, not its strongest part), and the convex hull of the strong-change component
-    and the lobes beside it (`imprint_lobes`). From each, sub-pixel edge points along rays
-    (`_ray_edges`) are fitted with a circle: RANSAC against rays that cross a shadow or a
-    neighbouring change, radius within the plausible range, then a weighted geometric
-    least-squares fit to the inliers, three times from the new centre. Of the two circles, the
-    one with the most edge weight on it (`edge_support`) among those whose disc mostly shows a
-    change is kept (the component's unless the other has RESTART_GAIN times its edge weight).
-    When neither start gives a circle whose rim stands RING_Z_MIN robust deviations out of the
-    change around it (`imprint.ring_contrast`; a background taken under another light leaves a
-    texture in which only the imprint's brightest lobe stands out, and a circle fitted to the
-    texture does not pass), the disc search is run again at `imprint.TEXTURE_LEVEL`, and its
-    circle replaces the first only when its rim does pass.
+    background and the press taken out) gives two starts: the disc over the plausible radii
+    (`radius_range`, from the ball and the scale) that best covers the changed pixels
+    (`imprint.disc_search`: the whole change, not its strongest part), and the convex hull of
+    the strong-change component and the lobes beside it (`imprint_lobes`). From each, sub-pixel
+    edge points along rays (`_ray_edges`) are fitted with a circle: RANSAC against rays that
+    cross a shadow or a neighbouring change, radius within the plausible range, then a weighted
+    geometric least-squares fit to the inliers, three times from the new centre. Of the two
+    circles, the one with the most edge weight on it (`edge_support`) among those whose disc
+    mostly shows a change is kept (the component's unless the other has RESTART_GAIN times its
+    edge weight). When neither start gives a circle whose rim stands RING_Z_MIN robust
+    deviations out of the change around it (`imprint.ring_contrast`; a background taken under
+    another light leaves a texture in which only the imprint's brightest lobe stands out, and a
+    circle fitted to the texture does not pass), the disc search is run again at each of
+    `imprint.TEXTURE_LEVELS`, and the circle whose rim stands out most replaces the first when
+    its rim does pass.
     ball_px: the ball radius in pixels (without it, any radius from
     min_radius_px). start: a first guess (x, y, r) instead of the two starts (what calibration
     retries with when the first circle fails its check). restarts: fit again from 8 starts
@@ -328,16 +333,20 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
         found = _best_of_starts(m, found, sigma, min_radius_px, ball_px)
     if start is None and (found is None or ring_contrast(m, found) < RING_Z_MIN):
         # nothing, or a circle whose rim does not stand out (one fitted to a texture): the disc
-        # search at the texture level, kept only when its rim does stand out
-        textured = _search_fit(m, sigma, rr, TEXTURE_LEVEL)
-        if restarts:
-            textured = _best_of_starts(m, textured, sigma, min_radius_px, ball_px)
-        if textured is not None and ring_contrast(m, textured) >= RING_Z_MIN:
-            found = textured
+        # search at the texture levels, the circle whose rim stands out most, kept only when it
+        # does stand out
+        best = RING_Z_MIN
+        for level in TEXTURE_LEVELS:
+            textured = _search_fit(m, sigma, rr, level)
+            if restarts:
+                textured = _best_of_starts(m, textured, sigma, min_radius_px, ball_px)
+            z = -math.inf if textured is None else ring_contrast(m, textured)
+            if z >= best:
+                found, best = textured, z
     return found
 
 
-#: A circle found only at the texture level (`imprint.TEXTURE_LEVEL`) is kept when the change
+#: A circle found only at a texture level (`imprint.TEXTURE_LEVELS`) is kept when the change
 #: inside its rim stands this many robust deviations of the texture above the change outside
 #: it (`imprint.ring_contrast`).
 RING_Z_MIN = 3.5
