@@ -32,9 +32,18 @@ from vtsbench.recordings.media import read_image, write_png
 
 
 def dot_layer(h: int, w: int, mm: float, pitch: float = 1.2, diameter: float = 0.42,
-              darkness: float = 0.7, edge: float = 0.08) -> np.ndarray:
-    """Transmission (H, W) of a printed grid of soft dark dots (pitch, diameter in mm)."""
-    y, x = np.mgrid[0:h, 0:w].astype(np.float64) + 0.5
+              darkness: float = 0.7, edge: float = 0.08,
+              flow: tuple[float, float, float, float] | None = None) -> np.ndarray:
+    """Transmission (H, W) of a printed grid of soft dark dots (pitch, diameter in mm); flow
+    (x, y, r, u) px: the dots moved outward by u at the rim of the contact (x, y, r), u rho / r
+    inside it and u (r / rho)^2 outside, as a gel flows under a press."""
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    if flow is not None:
+        cx, cy, r, u = flow
+        rho = np.maximum(np.hypot(x - cx, y - cy), 1e-9)
+        k = u * np.where(rho <= r, rho / r, (r / rho) ** 2) / rho
+        x, y = x - k * (x - cx), y - k * (y - cy)
+    y, x = y + 0.5, x + 0.5
     p = pitch / mm
     dx, dy = ((x / p + 0.3) % 1 - 0.5) * p, ((y / p + 0.6) % 1 - 0.5) * p
     t = np.clip((np.hypot(dx, dy) * mm - (diameter / 2 - edge / 2)) / edge, 0, 1)
@@ -74,6 +83,34 @@ def test_marker_gel_depth_within_1_2x_of_the_same_presses_without(folders) -> No
     assert [h.reference for h in run.held_out] == ["truth", "truth"]
     assert held_rmse(run) <= 1.2 * held_rmse(base)
     assert held_rmse(off) > 1.5 * held_rmse(base)  # left in, the dots are learnt as slopes
+
+
+def test_dots_that_move_under_each_press_are_followed(folders, tmp_path, monkeypatch) -> None:
+    """The grid moved outward under every press (a tenth of the contact radius at the rim):
+    followed, the moved dots leave the held-out depth error within 1.2x of the same presses
+    without dots, against exact truth (measured 1.02x); filled whole, the former handling,
+    1.39x. (Moved by a fifth, more than half a dot at the rim, followed 1.38x, filled 1.48x.)"""
+    plain, marked, layer = folders
+    moved = tmp_path / "moved"
+    shutil.copytree(marked, moved)
+    m = load_manifest(moved)
+    h, w = layer.shape
+    for e in m.entries:
+        c = e.circle
+        flowed = dot_layer(h, w, MM_PER_PX, flow=(c.x, c.y, c.r, 0.1 * c.r))
+        im = read_image(plain / e.source.path).astype(np.float64)
+        write_png(moved / e.source.path,
+                  np.clip(np.rint(im * flowed[..., None]), 0, 255).astype(np.uint8))
+    base = held_rmse(calibrate(plain, method="poly", holdout=2, seed=1, device=None))
+    run = calibrate(moved, method="poly", holdout=2, seed=1, device=None)
+    followed = held_rmse(run)
+    frame = run.held_out[0].press.image
+    assert run.calibration.dots(frame).offset is not None  # some dots were followed
+    # nothing can be followed: moved dots filled whole
+    monkeypatch.setattr("vtsbench.depth.markers.FOLLOW_SHARE", -1.0)
+    filled = held_rmse(calibrate(moved, method="poly", holdout=2, seed=1, device=None))
+    assert followed < filled
+    assert followed <= 1.2 * base
 
 
 def test_dividing_by_the_dots_transmission_gives_the_difference_without_them(folders) -> None:
