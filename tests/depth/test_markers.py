@@ -89,8 +89,8 @@ def test_dots_that_move_under_each_press_are_followed(folders, tmp_path, monkeyp
     """The grid moved outward under every press (a tenth of the contact radius at the rim):
     followed, the moved dots leave the held-out depth error within 1.2x of the same presses
     without dots, against exact truth (measured 1.02x); filled whole, the former handling,
-    1.39x. (Moved by a fifth, followed 1.38x, filled 1.48x: inside the contact the grid is
-    stretched by a fifth, which no shift of a dot explains.)"""
+    1.39x. (Moved by a fifth, followed 1.38x, filled 1.48x: at the rim a dot then moves more
+    than half its size, beyond the following's reach.)"""
     plain, marked, layer = folders
     moved = tmp_path / "moved"
     shutil.copytree(marked, moved)
