@@ -121,13 +121,15 @@ def test_detection_holds_across_lights_orientation_markers_and_jpeg(layout, shap
 
 
 @pytest.mark.parametrize("layout", list(LAYOUTS))
-def test_markers_that_move_under_the_press(layout) -> None:
+@pytest.mark.parametrize("shape", [(320, 240), (320, 427), (427, 320)])
+def test_markers_that_move_under_the_press(layout, shape) -> None:
     """Large dots (0.45 of the ball across) moved outward in and around a faint contact (0.2 of
     the rendered change; 0.1 r at the rim, falling off outside): a moved dot leaves a crescent
     of change where it was and where it went, and filling every dot of either frame keeps
     those off the circle. Dividing the change by the background's dots instead put every such
-    circle 23-41 px off, 43-71 % too small."""
-    h, w, ball = 320, 240, 46.0
+    circle 23-41 px off, 43-71 % too small. Portrait and landscape, and the 320x427 frames of a
+    marker-gel GelSight."""
+    (h, w), ball = shape, 46.0
     for x, y, r in ((0.45 * w + 0.3, 0.55 * h - 0.2, 40.0), (w - 50.4, 52.7, 30.5)):
         bg, img = render(h, w, x, y, r, ball, layout, markers=True, jpeg=75, flow=0.1,
                          dot=0.45, pitch=1.1, strength=0.2)
