@@ -52,11 +52,11 @@ DOT_MIN_GAIN = 0.4
 #: simulator's marker gels (`benchmarks/circles_variants.py`, `circles_sim_variants.py`, in
 #: docs/depth.md): without the hold (division alone) DIGIT moved kept 14 % of centres within
 #: 3 px of the labels and dropped one press (6 rotated with JPEG); at 1.0, 57 % and none (the
-#: two presses under another light rotated with JPEG); at 1.5, 50 % and none (4); at 2, 43 %
-#: and 2 (4). Filling
-#: every dot instead of dividing (the limit of a hold at 0) cost the simulated marker gels the
-#: rim under dots as wide as a contact (detected circles 1.32x the depth error without markers
-#: where 1.0 gives 1.24x and division 1.18x).
+#: two presses under another light rotated with JPEG); at 1.25, 64 % and none (43 % rotated
+#: with JPEG); at 1.5, 50 % and none (4 rotated); at 2, 43 % and 2 (4). Filling every dot
+#: instead of dividing (the limit of a hold at 0) cost the simulated marker gels the rim under
+#: dots as wide as a contact (detected circles 1.32x the depth error without markers where 1.0
+#: gives 1.24x, 1.25 gives 1.18x and division alone 1.18x).
 DOT_CLIP = 1.0
 
 
