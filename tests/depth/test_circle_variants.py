@@ -9,8 +9,9 @@ import math
 import numpy as np
 import pytest
 
+from tests.fixtures.flow import Flow, unflowed_grid
 from vtsbench.depth.imprint import disc_search
-from vtsbench.depth.markers import marker_dots
+from vtsbench.depth.markers import detect_markers
 from vtsbench.depth.sphere import change_map, detect_circle, radius_range
 
 #: Light layouts: (colour RGB, azimuth deg, elevation deg) of each light.
@@ -27,16 +28,10 @@ LAYOUTS = {
 
 
 def _markers(h: int, w: int, pitch: float, dot: float,
-             flow: tuple[float, float, float, float] | None = None) -> np.ndarray:
+             flow: Flow | None = None) -> np.ndarray:
     """A grid of dark dots (transmission 0.3 at their centre), soft-edged; flow (x, y, r, u):
-    the dots moved outward by u px at the rim of the contact (x, y, r), u rho / r inside it and
-    u (r / rho)^2 outside, as a gel flows under a press."""
-    yy, xx = np.mgrid[:h, :w].astype(np.float64)
-    if flow is not None:
-        x, y, r, u = flow
-        rho = np.maximum(np.hypot(xx - x, yy - y), 1e-9)
-        s = u * np.where(rho <= r, rho / r, (r / rho) ** 2) / rho
-        xx, yy = xx - s * (xx - x), yy - s * (yy - y)
+    the dots moved outward by u px at the rim of the contact (x, y, r) (`unflowed_grid`)."""
+    yy, xx = unflowed_grid(h, w, flow)
     dx = (xx - pitch / 3) % pitch
     dy = (yy - pitch / 4) % pitch
     d = np.hypot(np.minimum(dx, pitch - dx), np.minimum(dy, pitch - dy))
@@ -191,9 +186,9 @@ def test_marker_grid_is_found_and_leaves_no_pattern() -> None:
     """The dots of the background are found with their size; on them the change map of a press
     is as strong as around them (no holes where the dots are)."""
     bg, img = render(240, 320, 160.2, 120.4, 40.0, 46.0, "side3", markers=True)
-    dots = marker_dots(bg)
-    assert dots is not None and 4 < dots[1] < 12  # drawn 6.9 px wide
-    assert marker_dots(render(240, 320, 0, 0, 1, 46.0, "side3", press=False)[0]) is None
+    spec = detect_markers(bg, None)
+    assert spec is not None and 4 < spec.diameter_px < 12  # drawn 6.9 px wide
+    assert detect_markers(render(240, 320, 0, 0, 1, 46.0, "side3", press=False)[0], None) is None
     _, plain = render(240, 320, 160.2, 120.4, 40.0, 46.0, "side3")
     bg0, _ = render(240, 320, 160.2, 120.4, 40.0, 46.0, "side3")
     truth = change_map(plain, bg0, 1.0)

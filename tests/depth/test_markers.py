@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from tests.fixtures.calibration import MM_PER_PX, sim_folder
+from tests.fixtures.flow import Flow, unflowed_grid
 from vtsbench.depth.calibration import (
     calibrate,
     colour_difference,
@@ -33,16 +34,11 @@ from vtsbench.recordings.media import read_image, write_png
 
 def dot_layer(h: int, w: int, mm: float, pitch: float = 1.2, diameter: float = 0.42,
               darkness: float = 0.7, edge: float = 0.08,
-              flow: tuple[float, float, float, float] | None = None) -> np.ndarray:
+              flow: Flow | None = None) -> np.ndarray:
     """Transmission (H, W) of a printed grid of soft dark dots (pitch, diameter in mm); flow
-    (x, y, r, u) px: the dots moved outward by u at the rim of the contact (x, y, r), u rho / r
-    inside it and u (r / rho)^2 outside, as a gel flows under a press."""
-    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
-    if flow is not None:
-        cx, cy, r, u = flow
-        rho = np.maximum(np.hypot(x - cx, y - cy), 1e-9)
-        k = u * np.where(rho <= r, rho / r, (r / rho) ** 2) / rho
-        x, y = x - k * (x - cx), y - k * (y - cy)
+    (x, y, r, u) px: the dots moved outward by u at the rim of the contact (x, y, r)
+    (`unflowed_grid`)."""
+    y, x = unflowed_grid(h, w, flow)
     y, x = y + 0.5, x + 0.5
     p = pitch / mm
     dx, dy = ((x / p + 0.3) % 1 - 0.5) * p, ((y / p + 0.6) % 1 - 0.5) * p

@@ -181,17 +181,6 @@ def marker_mask(images: np.ndarray, spec: MarkerSpec,
     return out.reshape(*lead, h, w)
 
 
-def marker_dots(background: np.ndarray, mm_per_px: float | tuple[float, float] | None = None,
-                grow_px: int = 2) -> tuple[np.ndarray, float] | None:
-    """(mask H x W bool, diameter px) of the marker dots of a no-contact frame, grown by
-    grow_px (their soft edge), or None without a grid: `detect_markers` and `marker_mask` of
-    the background."""
-    spec = detect_markers(background, mm_per_px, grow_px=grow_px)
-    if spec is None:
-        return None
-    return marker_mask(background, spec), spec.diameter_px
-
-
 #: Below this transmission a dot's colour change is too faint to divide back (its noise and
 #: quantisation would be amplified more than 1 / DOT_MIN_TRANSMISSION times): filled instead.
 DOT_MIN_TRANSMISSION = 0.2
@@ -251,7 +240,6 @@ def _follow(t_f: np.ndarray, t_bg: np.ndarray, region: np.ndarray, max_px: float
     yy, xx = np.mgrid[:ph, :pw].astype(np.float32)
     u = np.zeros(2)
     dark = float((1.0 - t_bg[region]).mean())
-    r = t_f[region] - t_bg[region]
     for _ in range(8):
         t = cv2.remap(t_bg, xx - np.float32(u[0]), yy - np.float32(u[1]), cv2.INTER_LINEAR,
                       borderMode=cv2.BORDER_REPLICATE)
@@ -305,8 +293,7 @@ def dot_correction(images: np.ndarray, spec: MarkerSpec, background: np.ndarray,
     base_gain = 1.0 / np.maximum(trans, DOT_MIN_TRANSMISSION)
     level = background.astype(np.float32) / np.maximum(trans, 1e-3)  # the dot-free background
     fill = np.empty((frames.shape[0], h, w), bool)
-    gains: dict[int, np.ndarray] = {}
-    offsets: dict[int, np.ndarray] = {}
+    gain = offset = None  # per frame, made at the first dot followed
     pad = g + math.ceil(spec.diameter_px / 2)
     for k, f in enumerate(frames):
         grey = f.astype(np.float32).mean(axis=-1)
@@ -337,13 +324,13 @@ def dot_correction(images: np.ndarray, spec: MarkerSpec, background: np.ndarray,
                            borderMode=cv2.BORDER_REPLICATE)
             # the dot's old and new place, not a neighbour's
             here = ((own == c) | ((own == 0) & (ts.mean(axis=-1) < 1.0)))
-            if k not in gains:
-                gains[k] = base_gain.copy()
-                offsets[k] = np.zeros((h, w, arr.shape[-1]), np.float32)
+            if gain is None:
+                gain = np.repeat(base_gain[None], frames.shape[0], axis=0)
+                offset = np.zeros_like(gain)
             gk = 1.0 / np.maximum(ts, DOT_MIN_TRANSMISSION)
-            gains[k][ys, xs][here] = gk[here]
-            offsets[k][ys, xs][here] = (background[ys, xs].astype(np.float32) * gk
-                                        - level[ys, xs])[here]
+            gain[k, ys, xs][here] = gk[here]
+            offset[k, ys, xs][here] = (background[ys, xs].astype(np.float32) * gk
+                                       - level[ys, xs])[here]
             core = hole_dark[ys, xs]
             core[here] = ts.mean(axis=-1)[here] < DOT_MIN_TRANSMISSION
             moved[c] = False
@@ -355,17 +342,10 @@ def dot_correction(images: np.ndarray, spec: MarkerSpec, background: np.ndarray,
         touch[0] = True
         hole = moved[labels] | ~touch[fl] | hole_dark
         fill[k] = cv2.dilate(hole.view(np.uint8), kernel).view(bool)
-    if gains:
-        gain = np.empty((frames.shape[0], h, w, arr.shape[-1]), np.float32)
-        offset = np.zeros_like(gain)
-        for k in range(frames.shape[0]):
-            gain[k] = gains.get(k, base_gain)
-            if k in offsets:
-                offset[k] = offsets[k]
-        return DotCorrection(gain.reshape(arr.shape), fill.reshape(*lead, h, w),
-                             offset.reshape(arr.shape))
-    return DotCorrection(np.broadcast_to(base_gain.astype(np.float32), arr.shape),
-                         fill.reshape(*lead, h, w))
+    if gain is None:
+        return DotCorrection(np.broadcast_to(base_gain, arr.shape), fill.reshape(*lead, h, w))
+    return DotCorrection(gain.reshape(arr.shape), fill.reshape(*lead, h, w),
+                         offset.reshape(arr.shape))
 
 
 def fill_gradients(g: np.ndarray, mask: np.ndarray) -> np.ndarray:

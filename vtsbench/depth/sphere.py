@@ -147,9 +147,11 @@ def change_map(image: np.ndarray, background: np.ndarray, sigma: float,
     from .markers import detect_markers, marker_mask
 
     spec = detect_markers(background, None) if markers else None
-    dots = None if spec is None else (marker_mask(background, spec),
-                                      marker_mask(image, spec, background), spec.diameter_px)
-    return imprint_change(image, background, sigma, dots)
+    if spec is None:
+        return imprint_change(image, background, sigma, None)
+    still = marker_mask(background, spec)  # grown dots: the union's growth is the grown union
+    return imprint_change(image, background, sigma,
+                          (still, still | marker_mask(image, spec), spec.diameter_px))
 
 
 def fit_circle(xs: np.ndarray, ys: np.ndarray, weights: np.ndarray | None = None
