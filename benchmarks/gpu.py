@@ -45,6 +45,8 @@ BATCHES = (1, 8, 32)
 
 def depth_table(tmp: Path, args: argparse.Namespace, dev: str) -> list[str]:
     """Markdown rows: every mapping x solver, numpy against torch on `dev` at each batch size."""
+    import torch
+
     from vtsbench.depth.calibration import calibrate, load_presses
     from vtsbench.depth.reconstruct import reconstruct
     from vtsbench.sim.simulate import simulate
@@ -56,7 +58,6 @@ def depth_table(tmp: Path, args: argparse.Namespace, dev: str) -> list[str]:
     frames = np.stack([presses[i % len(presses)].image for i in range(args.frames)])
     cals = {m: calibrate(sim, method=m, holdout=6, seed=0, device=dev).calibration
             for m in METHODS}
-    ref = GsSdkStyle(cals["lut"].background, cals["lut"].mm_per_px[0], 2)
     modes: dict[str, Callable[[np.ndarray], object]] = {
         "gs_sdk-style": lambda f: [ref.surface(x) for x in f]}
     diff: dict[tuple[str, str], float] = {}
@@ -69,7 +70,12 @@ def depth_table(tmp: Path, args: argparse.Namespace, dev: str) -> list[str]:
             for b in BATCHES:
                 modes[f"{m} {s} {b}"] = (lambda f, c=cals[m], s=s, b=b:
                                          reconstruct(f, c, solver=s, device=dev, batch=b))
-    speed = alternated(modes, frames, args.rounds)
+    threads = torch.get_num_threads()
+    ref = GsSdkStyle(cals["lut"].background, cals["lut"].mm_per_px[0], 2)  # sets 2 threads
+    try:
+        speed = alternated(modes, frames, args.rounds)
+    finally:
+        torch.set_num_threads(threads)  # the training part reads its batches with all of them
     base = speed["gs_sdk-style"]
     head = " | ".join(f"{dev} batch {b} (x ref)" for b in BATCHES)
     rows = [f"Depth at 480x640, {args.frames} frames a mode, {args.rounds} alternated rounds "
