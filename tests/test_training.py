@@ -65,6 +65,34 @@ def test_resume_after_kill_gives_bit_identical_weights(tmp_path: Path) -> None:
     assert any(not torch.equal(a[k], weights(other.model)[k]) for k in a)
 
 
+def test_prefetch_reads_the_same_batches_and_resumes_exactly(tmp_path: Path) -> None:
+    """The next batch read in a thread (the CUDA default) trains the same weights as reading it
+    in the loop, also across a kill and a resume, and reads each step's batch once."""
+    reads: list[int] = []
+
+    class Counted(list):
+        """tiny_data, counting the items read."""
+
+        def __getitem__(self, i):  # type: ignore[override]
+            reads.append(i)
+            return super().__getitem__(i)
+
+    plain = train_loop(tiny_model(), ce, tiny_data(), tmp_path / "plain", CFG, seed=7,
+                       device="cpu", progress=False, prefetch=False)
+    ahead = train_loop(tiny_model(), ce, Counted(tiny_data()), tmp_path / "ahead", CFG, seed=7,
+                       device="cpu", progress=False, prefetch=True)
+    assert len(reads) == CFG.steps * CFG.batch_size
+    cut = train_loop(tiny_model(), ce, tiny_data(), tmp_path / "cut", CFG, seed=7,
+                     device="cpu", progress=False, prefetch=True, stop_after=7)
+    assert cut.step == 7
+    resumed = train_loop(tiny_model(), ce, tiny_data(), tmp_path / "cut", CFG, seed=7,
+                         device="cpu", progress=False, prefetch=True)
+    assert plain.losses == ahead.losses
+    for res in (ahead, resumed):
+        a, b = weights(plain.model), weights(res.model)
+        assert all(torch.equal(a[k], b[k]) for k in a)
+
+
 def test_checkpoint_is_safetensors_with_optimizer_and_rng(tmp_path: Path) -> None:
     from safetensors import safe_open
 
