@@ -11,7 +11,7 @@ numpy path's says that both compute the same map.
 Training: the v2-demo benchmark is made (`vtsbench benchmark v2-demo`), then each paper-size
 model (TimeSformer-base 8x224x224 with the results profile's config, ResNet-50 at 224) trains for
 --steps steps through its recipe on the GPU (mixed precision) four times, reading each batch in
-the loop, then reading the next one ahead in a thread (the loop's CUDA default) twice, then in
+the loop, then reading the next one ahead in a thread (TimeSformer's choice on CUDA) twice, then in
 the loop again (each mode's figure the mean of its two runs), is predicted with
 `vtsbench predict --device cuda` and scored with `vtsbench eval`. Per step: the median seconds,
 and the share spent reading and cutting the batch on the CPU (`read_items`), hence the hours the
@@ -99,8 +99,6 @@ def timed_train(recipe: Any, dataset: Path, split: str, out: Path, config: dict[
     """Train through the recipe, timing each step (one `read_items` call starts each step) and
     the batch reading within it; `prefetch`: the training loop's, the next batch read in a
     thread while the step computes."""
-    import functools
-
     import vtsbench.training as training
 
     marks: list[tuple[float, float]] = []
@@ -114,7 +112,8 @@ def timed_train(recipe: Any, dataset: Path, split: str, out: Path, config: dict[
 
     loop = training.train_loop
     training.read_items = timed
-    training.train_loop = functools.partial(loop, prefetch=prefetch)  # the recipe imports it
+    # forced over the recipe's own choice; the recipe imports train_loop when it trains
+    training.train_loop = lambda *a, **k: loop(*a, **{**k, "prefetch": prefetch})
     t0 = time.perf_counter()
     try:
         recipe.train(dataset, split, out, config, seed=0, device=dev, progress=False)

@@ -198,3 +198,23 @@ def test_marker_grid_is_found_and_leaves_no_pattern() -> None:
     err_with = np.abs(with_dots - truth)[ring].mean()
     err_without = np.abs(without - truth)[ring].mean()
     assert err_with < 0.5 * err_without, (err_with, err_without)
+
+
+def test_the_background_dots_are_found_once_per_background(monkeypatch) -> None:
+    """Every press of a set is compared with one background: its dots are found on the first
+    press only, the maps are those found afresh, and another background gets its own dots."""
+    import vtsbench.depth.markers as markers
+    import vtsbench.depth.sphere as sphere
+
+    bg, img = render(240, 320, 160.2, 120.4, 40.0, 46.0, "side3", markers=True)
+    bg2, img2 = render(240, 320, 100.0, 140.0, 36.0, 46.0, "side3", markers=True, seed=3)
+    sphere._BACKGROUND_DOTS.clear()
+    fresh = [change_map(i, b, 1.0, markers=True) for i, b in ((img, bg), (img2, bg2))]
+    calls = []
+    found = markers.detect_markers
+    monkeypatch.setattr(markers, "detect_markers", lambda *a: calls.append(1) or found(*a))
+    for i, b, want, n in ((img, bg, fresh[0], 1), (img.copy(), bg.copy(), fresh[0], 1),
+                          (img2, bg2, fresh[1], 2)):
+        np.testing.assert_array_equal(change_map(i, b, 1.0, markers=True), want)
+        assert len(calls) == n
+    assert not sphere._BACKGROUND_DOTS[next(iter(sphere._BACKGROUND_DOTS))][1].flags.writeable

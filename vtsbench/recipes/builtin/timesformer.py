@@ -264,8 +264,10 @@ class TimesformerRecipe(Recipe):
         cfg = TrainConfig.from_recipe(
             config, {"recipe": self.name, "recipe_config": json.dumps(config), "split": split,
                      **train_window_meta(view.dataset.info)})
+        # on CUDA the next batch is read while the GPU computes: the crops and flows of 16
+        # sequences took 29 % of TimeSformer-base's step on an H100 (benchmarks/gpu.py)
         res = train_loop(model, loss_fn, data, out_dir, cfg, seed=seed, device=device,
-                         resume=resume, progress=progress)
+                         resume=resume, progress=progress, prefetch=None)
         return res.checkpoint
 
     def _load(self, checkpoint: str | Path, device: str
