@@ -357,11 +357,9 @@ def train_loop(model: torch.nn.Module, loss_fn: LossFn, dataset: Any, out_dir: s
         for step in range(start, cfg.steps):
             for g, base in zip(optimizer.param_groups, base_lrs, strict=True):
                 g["lr"] = base * lr_factor(step, cfg)
-            if pool is None or pending is None:
-                batch = fetch(step)
-            else:
-                batch = pending.result()
-                pending = pool.submit(fetch, step + 1) if step + 1 < cfg.steps else None
+            batch = fetch(step) if pending is None else pending.result()
+            if pool is not None and step + 1 < cfg.steps:
+                pending = pool.submit(fetch, step + 1)
             optimizer.zero_grad(set_to_none=True)
             with torch.autocast(device_type=dev.type, dtype=amp_dtype, enabled=use_amp):
                 loss = loss_fn(net, batch, dev)
