@@ -10,7 +10,8 @@ presses and the background), the colour channels swapped (RGB read as BGR), a da
 (0.6 times the light through an 8-bit gamma of 2.2), rotated, with markers, then
 JPEG-compressed, in turn, and with markers that move: the grid moved outward in each labelled
 contact as a gel flows under a press (FLOW_AT_RIM of the radius at the rim), alone and rotated
-then JPEG-compressed. Per set and variant, one row: presses used and dropped (`calibrate
+then JPEG-compressed; and other cameras: noisier (NOISE_DN), out of focus (BLUR_PX) and with a
+vignette (VIGNETTE). Per set and variant, one row: presses used and dropped (`calibrate
 --circles detect`), the detected circles against the labels (centre distance, median and share
 within 3 px of the variant's pixels, and in the set's own pixels; radius error after the 0.97 R
 clamp both get, median and share within 10 %; the share within both), and the held-out
@@ -43,7 +44,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from circles_real import REAL, held_out_rmse
 
 VARIANTS = ("base", "rot90", "mirror", "x0.5", "x1.5", "x2", "jpeg75", "markers", "swap", "dim",
-            "rot90-markers-jpeg75", "moved", "rot90-moved-jpeg75")
+            "rot90-markers-jpeg75", "moved", "rot90-moved-jpeg75", "noise", "blur", "vignette")
+#: Other cameras: noise (DN, per pixel and channel), defocus (Gaussian sigma, px), corners
+#: darkened to this share of the centre's light.
+NOISE_DN, BLUR_PX, VIGNETTE = 4.0, 1.5, 0.6
 MARKER_MM_PER_PX = 0.0634  # GelSight Mini at 320x240 (gelsight_mini_objects/gsmini.yaml)
 TAXIM_MM_PER_PX, TAXIM_BALL_MM = 0.1245, 2.0
 DIGIT_MM_PER_PX, DIGIT_BALL_MM = 1 / 21.09, 3.0
@@ -145,6 +149,22 @@ def variant(s: PressSet, how: str, layer: np.ndarray | None) -> PressSet | None:
     if how == "dim":  # a darker exposure: 0.6 times the light, then an 8-bit camera's gamma
         return s.map(lambda a: (255 * (0.6 * (a / 255.0) ** 2.2) ** (1 / 2.2)).round()
                      .astype(np.uint8), lambda c, hw: c)
+    if how == "noise":  # a noisier camera: Gaussian noise of 4 DN, drawn afresh for each frame
+        rng = np.random.default_rng(11)
+        return s.map(lambda a: np.clip(a + rng.normal(0, NOISE_DN, a.shape), 0, 255).round()
+                     .astype(np.uint8), lambda c, hw: c)
+    if how == "blur":  # a camera out of focus: a Gaussian of BLUR_PX
+        return s.map(lambda a: cv2.GaussianBlur(a, (0, 0), BLUR_PX), lambda c, hw: c)
+    if how == "vignette":  # a lens that darkens the corners to VIGNETTE of the centre
+        def vignette(a: np.ndarray) -> np.ndarray:
+            h, w = a.shape[:2]
+            yy, xx = np.mgrid[:h, :w]
+            rho2 = ((xx - (w - 1) / 2) ** 2 + (yy - (h - 1) / 2) ** 2) / (((w - 1) / 2) ** 2
+                                                                        + ((h - 1) / 2) ** 2)
+            fall = 1 - (1 - VIGNETTE) * rho2
+            return np.clip(a * fall[..., None], 0, 255).round().astype(np.uint8)
+
+        return s.map(vignette, lambda c, hw: c)
     if "-" in how:  # several in turn
         for part in how.split("-"):
             v = variant(s, part, layer)
