@@ -115,6 +115,36 @@ def test_detection_holds_across_lights_orientation_markers_and_jpeg(layout, shap
         assert math.hypot(cx - x, cy - y) < 1.5 and abs(cr / r - 1) < 0.05, (found, (x, y, r))
 
 
+def other_camera(a: np.ndarray, seed: int) -> np.ndarray:
+    """What a cheaper camera gives of a frame: corners darkened to 0.6, a defocus of 1.5 px and
+    Gaussian noise of 4 DN (benchmarks/circles_variants.py's `vignette`, `blur`, `noise`)."""
+    import cv2
+
+    h, w = a.shape[:2]
+    yy, xx = np.mgrid[:h, :w]
+    rho2 = ((xx - (w - 1) / 2) ** 2 + (yy - (h - 1) / 2) ** 2) / (((w - 1) / 2) ** 2
+                                                                + ((h - 1) / 2) ** 2)
+    b = cv2.GaussianBlur(a * (1 - 0.4 * rho2)[..., None], (0, 0), 1.5)
+    b = b + np.random.default_rng(seed).normal(0, 4.0, a.shape)
+    return np.clip(b, 0, 255).round().astype(np.uint8)
+
+
+@pytest.mark.parametrize("layout", list(LAYOUTS))
+@pytest.mark.parametrize("markers", [False, True])
+def test_detection_holds_on_a_noisy_defocused_vignetted_camera(layout, markers) -> None:
+    """The vignette, defocus and noise all at once, on a portrait frame: within 1.5 px and 5 %
+    of the rendered circle for both contacts; without contact, no circle."""
+    h, w, ball = 320, 240, 46.0
+    for x, y, r in ((0.45 * w + 0.3, 0.55 * h - 0.2, 40.0), (w - 50.4, 52.7, 30.5)):
+        bg, img = render(h, w, x, y, r, ball, layout, markers=markers)
+        found = detect_circle(other_camera(img, 1), other_camera(bg, 2), ball_px=ball)
+        assert found is not None, layout
+        assert math.hypot(found[0] - x, found[1] - y) < 1.5 and abs(found[2] / r - 1) < 0.05, \
+            (found, (x, y, r))
+    bg, img = render(h, w, 0, 0, 1, ball, layout, markers=markers, press=False)
+    assert detect_circle(other_camera(img, 3), other_camera(bg, 4), ball_px=ball) is None
+
+
 @pytest.mark.parametrize("layout", list(LAYOUTS))
 @pytest.mark.parametrize("shape", [(320, 240), (320, 427), (427, 320)])
 def test_markers_that_move_under_the_press(layout, shape) -> None:
