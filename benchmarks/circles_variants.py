@@ -10,13 +10,16 @@ presses and the background), the colour channels swapped (RGB read as BGR), a da
 (0.6 times the light through an 8-bit gamma of 2.2), rotated, with markers, then
 JPEG-compressed, in turn, and with markers that move: the grid moved outward in each labelled
 contact as a gel flows under a press (FLOW_AT_RIM of the radius at the rim), alone and rotated
-then JPEG-compressed; and other cameras: noisier (NOISE_DN), out of focus (BLUR_PX) and with a
-vignette (VIGNETTE). Per set and variant, one row: presses used and dropped (`calibrate
---circles detect`), the detected circles against the labels (centre distance, median and share
-within 3 px of the variant's pixels, and in the set's own pixels; radius error after the 0.97 R
-clamp both get, median and share within 10 %; the share within both), and the held-out
-plane-aligned RMSE of poly calibrations trained on the labelled and on the detected circles
-(hold-out of a fifth, seeds pooled, the same held-out presses, scored against the labels).
+then JPEG-compressed; and other cameras: noisier (NOISE_DN), out of focus (BLUR_PX), with a
+vignette (VIGNETTE), another white balance (BALANCE) and an auto exposure that brightens the
+presses but not the background (EXPOSURE; DIGIT's background is estimated from the presses,
+so there every frame is brighter alike). Per set and variant, one row: presses used and dropped
+(`calibrate --circles detect`), the detected circles against the labels (centre distance, median
+and share within 3 px of the variant's pixels, and in the set's own pixels; radius error after
+the 0.97 R clamp both get, median and share within 10 %; the share within both), and the
+held-out plane-aligned RMSE of poly calibrations trained on the labelled and on the detected
+circles (hold-out of a fifth, seeds pooled, the same held-out presses, scored against the
+labels).
 
 Where a detected centre is more than 3 px from its label, a referee that needs neither decides
 which one the imprint sides with: the centre about which the change is most point-symmetric
@@ -44,10 +47,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from circles_real import REAL, held_out_rmse
 
 VARIANTS = ("base", "rot90", "mirror", "x0.5", "x1.5", "x2", "jpeg75", "markers", "swap", "dim",
-            "rot90-markers-jpeg75", "moved", "rot90-moved-jpeg75", "noise", "blur", "vignette")
+            "rot90-markers-jpeg75", "moved", "rot90-moved-jpeg75", "noise", "blur", "vignette",
+            "balance", "exposure")
 #: Other cameras: noise (DN, per pixel and channel), defocus (Gaussian sigma, px), corners
-#: darkened to this share of the centre's light.
+#: darkened to this share of the centre's light; a white balance (R, G, B gains) and an auto
+#: exposure that makes the presses brighter than the background by this factor.
 NOISE_DN, BLUR_PX, VIGNETTE = 4.0, 1.5, 0.6
+BALANCE, EXPOSURE = (1.15, 1.0, 0.85), 1.08
 MARKER_MM_PER_PX = 0.0634  # GelSight Mini at 320x240 (gelsight_mini_objects/gsmini.yaml)
 TAXIM_MM_PER_PX, TAXIM_BALL_MM = 0.1245, 2.0
 DIGIT_MM_PER_PX, DIGIT_BALL_MM = 1 / 21.09, 3.0
@@ -165,6 +171,15 @@ def variant(s: PressSet, how: str, layer: np.ndarray | None) -> PressSet | None:
             return np.clip(a * fall[..., None], 0, 255).round().astype(np.uint8)
 
         return s.map(vignette, lambda c, hw: c)
+    if how == "balance":  # another white balance: red up, blue down, every frame alike
+        gain = np.array(BALANCE, np.float32)[::-1]  # frames are BGR, as written
+        return s.map(lambda a: np.clip(a * gain, 0, 255).round().astype(np.uint8),
+                     lambda c, hw: c)
+    if how == "exposure":  # auto exposure: the presses EXPOSURE times as bright as the background
+        out = s.map(lambda a: np.clip(a * EXPOSURE, 0, 255).round().astype(np.uint8),
+                    lambda c, hw: c)
+        return PressSet(out.name, out.images, s.bg, out.labels, out.mm_per_px, out.ball_mm,
+                        out.factor, out.fwd)
     if "-" in how:  # several in turn
         for part in how.split("-"):
             v = variant(s, part, layer)
