@@ -238,11 +238,15 @@ def _follow(t_f: np.ndarray, t_bg: np.ndarray, region: np.ndarray, max_px: float
 
     ph, pw = t_bg.shape
     yy, xx = np.mgrid[:ph, :pw].astype(np.float32)
+
+    def shifted(u: np.ndarray) -> np.ndarray:
+        return cv2.remap(t_bg, xx - np.float32(u[0]), yy - np.float32(u[1]), cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_REPLICATE)
+
     u = np.zeros(2)
     dark = float((1.0 - t_bg[region]).mean())
     for _ in range(8):
-        t = cv2.remap(t_bg, xx - np.float32(u[0]), yy - np.float32(u[1]), cv2.INTER_LINEAR,
-                      borderMode=cv2.BORDER_REPLICATE)
+        t = shifted(u)
         gy, gx = (a[region] for a in np.gradient(t))
         r = t_f[region] - t[region]
         a = np.array([[gx @ gx, gx @ gy], [gx @ gy, gy @ gy]])
@@ -254,8 +258,7 @@ def _follow(t_f: np.ndarray, t_bg: np.ndarray, region: np.ndarray, max_px: float
             return None
         if np.hypot(*du) < 0.02:
             break
-    t = cv2.remap(t_bg, xx - np.float32(u[0]), yy - np.float32(u[1]), cv2.INTER_LINEAR,
-                  borderMode=cv2.BORDER_REPLICATE)
+    t = shifted(u)
     if float(np.abs(t_f[region] - t[region]).mean()) > FOLLOW_SHARE * max(dark, 1e-6):
         return None
     return float(u[0]), float(u[1])
