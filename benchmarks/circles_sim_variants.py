@@ -13,8 +13,11 @@ contact) of poly calibrations trained on the detected and on the exact circles: 
 quarter of the presses held out, every variant the same presses. The marker rows also give
 their RMSE over that of the same presses without markers (must stay within 1.2x).
 
+With --deep, circles only: the same ball at a coarser scale (46 px in radius) pressed to
+contacts of 0.5, 0.7, 0.85 and 0.95 of its radius (`DEEP_FRACS`), every layout, gel and frame.
+
     nice -n 15 .venv/bin/python benchmarks/circles_sim_variants.py [--presses 16]
-        [--lights zones3,sides4,uniform] [--method poly] [--seed 0]
+        [--lights zones3,sides4,uniform] [--method poly] [--seed 0] [--deep]
 """
 
 from __future__ import annotations
@@ -39,10 +42,12 @@ MM_PER_PX = 0.05
 GELS = ("none", "markers")
 
 
-def render_presses(lights: str, gel: str, shape: tuple[int, int], n: int, seed: int
+def render_presses(lights: str, gel: str, shape: tuple[int, int], n: int, seed: int,
+                   mm_per_px: float = MM_PER_PX, depths: list[float] | None = None
                    ) -> tuple[np.ndarray, list[tuple[str, np.ndarray, tuple, object]]]:
     """The background and n presses (id, frame, exact circle, truth) of one layout, gel and
-    frame shape; the same scenes and noise draws for every layout and gel."""
+    frame shape; the same scenes and noise draws for every layout and gel. depths: press i
+    that deep (mm) instead of a drawn depth."""
     from vtsbench.sim.appearance import background, sensor_appearance
     from vtsbench.sim.optics import Capture, sensor
     from vtsbench.sim.plan import press_scene
@@ -52,13 +57,14 @@ def render_presses(lights: str, gel: str, shape: tuple[int, int], n: int, seed: 
     app = sensor_appearance("markers")
     if gel == "none":
         app = dataclasses.replace(app, marker_share=0.0)
-    fields = sensor(*shape, MM_PER_PX, lights=lights)
+    fields = sensor(*shape, mm_per_px, lights=lights)
     cap = Capture(gel=seed)
     bg = background(app, fields, cap, np.random.default_rng([seed, 1]))
     out = []
     for i in range(n):
         rng = np.random.default_rng([seed, 2, i])
-        scene = press_scene(rng, shape, MM_PER_PX, 2, app)
+        scene = press_scene(rng, shape, mm_per_px, 2, app,
+                            depth_mm=None if depths is None else depths[i])
         truth = render(scene.with_effects(dataclasses.replace(scene.effects, noise=False)))
         frame = relight(truth.grad, fields, cap, rng, app)[0]
         (cx, cy), r = scene.centers_px[0], math.sqrt(truth.contact[0].sum() / math.pi)
@@ -127,13 +133,60 @@ def measure(tmp: Path, name: str, bg: np.ndarray, presses: list, held_n: int,
     return out
 
 
+#: --deep: the ball at this scale (46 px in radius, as on a 320x240 sensor at 19.6 px/mm with
+#: a 4.7 mm ball) pressed to contacts of these fractions of its radius, DEEP_PER presses each.
+DEEP_MM_PER_PX, DEEP_FRACS, DEEP_PER = 3.0 / 46, (0.5, 0.7, 0.85, 0.95), 4
+
+
+def deep(lights: list[str], seed: int) -> None:
+    """Detection only, on presses as deep as a contact of 0.5-0.95 ball radii: per layout, gel
+    and frame, the centre and radius errors against the exact circles, and the presses beyond
+    3 px per depth."""
+    from vtsbench.depth.sphere import ball_radius_px, detect_circle
+    from vtsbench.sim.objects import BALL_RADIUS_MM
+
+    big = BALL_RADIUS_MM
+    depths = [big - math.sqrt(big**2 - (f * big) ** 2) for f in DEEP_FRACS for _ in
+              range(DEEP_PER)]
+    ball = ball_radius_px(big, DEEP_MM_PER_PX)
+    print(f"Deep presses: a {big} mm ball at {DEEP_MM_PER_PX:.4f} mm/px ({ball:.0f} px), "
+          f"{DEEP_PER} presses at each contact of {', '.join(map(str, DEEP_FRACS))} ball radii\n")
+    print("| lights | gel | frame | found | centre error px, median / max | within 3 px | "
+          "radius error, median / max | beyond 3 px by contact/ball |")
+    print("|---|---|---|---:|---|---:|---|---|")
+    for name in lights:
+        for gel in GELS:
+            for frame, shape in SHAPES.items():
+                bg, presses = render_presses(name, gel, shape, len(depths), seed,
+                                             DEEP_MM_PER_PX, depths)
+                d, r, far = [], [], dict.fromkeys(DEEP_FRACS, 0)
+                for i, (_, img, (x, y, rad), _) in enumerate(presses):
+                    c = detect_circle(img, bg, ball_px=ball)
+                    e = math.inf if c is None else math.hypot(c[0] - x, c[1] - y)
+                    d.append(e)
+                    r.append(math.inf if c is None else abs(c[2] / rad - 1))
+                    far[DEEP_FRACS[i // DEEP_PER]] += e > 3
+                fin = [v for v in d if math.isfinite(v)]
+                rf = [v for v in r if math.isfinite(v)]
+                print(f"| {name} | {gel} | {frame} | {len(fin)} of {len(d)} | "
+                      f"{np.median(fin):.2f} / {max(fin):.2f} | "
+                      f"{np.mean(np.array(d) <= 3):.0%} | {np.median(rf):.1%} / {max(rf):.1%} | "
+                      + ", ".join(f"{f}: {n}" for f, n in far.items()) + " |", flush=True)
+    print(f"\nMachine: {machine()}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--presses", type=int, default=16)
     ap.add_argument("--lights", default=",".join(LIGHTS))
     ap.add_argument("--method", default="poly")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--deep", action="store_true",
+                    help="circles only, on presses of 0.5-0.95 ball radii (DEEP_FRACS)")
     args = ap.parse_args()
+    if args.deep:
+        deep(args.lights.split(","), args.seed)
+        return
     held_n = max(1, args.presses // 4)
     print(f"{args.presses} simulated presses of a 3 mm ball a variant at {MM_PER_PX} mm/px, "
           f"{held_n} held out, {args.method}, seed {args.seed}\n")

@@ -248,3 +248,51 @@ def test_the_background_dots_are_found_once_per_background(monkeypatch) -> None:
         np.testing.assert_array_equal(change_map(i, b, 1.0, markers=True), want)
         assert len(calls) == n
     assert not sphere._BACKGROUND_DOTS[next(iter(sphere._BACKGROUND_DOTS))][1].flags.writeable
+
+
+def _sim_press(lights: str, shape: tuple[int, int], r_over_ball: float, mm_per_px: float,
+               seed: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, tuple[float, float, float],
+                                               float]:
+    """(background, press, exact circle (x, y, r) px, ball radius px) of the simulator's 3 mm
+    ball pressed to a contact of r_over_ball ball radii at a place drawn from seed (its contact
+    6 px inside the frame), shot through a light layout of its optics and its marker gel and
+    camera (`sim.relight`)."""
+    import dataclasses
+
+    from vtsbench.sim.appearance import background, sensor_appearance
+    from vtsbench.sim.objects import BALL, BALL_RADIUS_MM, random_instance
+    from vtsbench.sim.optics import Capture, sensor
+    from vtsbench.sim.plan import _generation
+    from vtsbench.sim.relight import relight
+    from vtsbench.sim.scene import Effects, Scene
+    from vtsbench.sim.scene import render as render_scene
+
+    app = sensor_appearance("markers")
+    fields = sensor(*shape, mm_per_px, lights=lights)
+    cap = Capture(gel=0)
+    bg = background(app, fields, cap, np.random.default_rng([0, 1]))
+    rng = np.random.default_rng(seed)
+    big = BALL_RADIUS_MM
+    depth = big - math.sqrt(big**2 - (r_over_ball * big) ** 2)
+    reach = math.sqrt(2 * big * depth - depth**2) / mm_per_px + 6
+    x = float(rng.uniform(reach, shape[1] - 1 - reach))
+    y = float(rng.uniform(reach, shape[0] - 1 - reach))
+    scene = _generation(Scene(random_instance(BALL, rng), ((x, y),), (depth,), shape, mm_per_px,
+                              Effects(texture=False)), 2, app)
+    truth = render_scene(scene.with_effects(dataclasses.replace(scene.effects, noise=False)))
+    frame = relight(truth.grad, fields, cap, rng, app)[0]
+    return bg, frame, (x, y, math.sqrt(truth.contact[0].sum() / math.pi)), big / mm_per_px
+
+
+def test_a_circle_on_one_lobe_loses_to_the_rim_that_stands_out() -> None:
+    """A deep press near a corner under four coloured side lights, through a marker gel: the
+    strong-change start settles on one bright lobe (r 20.9 px of 40.5, 20.8 px off), the whole-
+    change start on the contact; with equal edge support the lobe's circle was kept. Its rim
+    stands out 15.5 robust deviations, the contact's 56: a start whose rim stands out twice as
+    much now wins (on 342 other simulated presses the two starts' contrasts differ by 0.72-1.02
+    times, and no real press of the variants changes)."""
+    bg, img, (x, y, r), ball = _sim_press("sides4", (240, 320), 0.95, 0.0652, (0, 2, 3, 95))
+    found = detect_circle(img, bg, ball_px=ball)
+    assert found is not None
+    assert math.hypot(found[0] - x, found[1] - y) < 0.15 * r and abs(found[2] / r - 1) < 0.12, \
+        (found, r)

@@ -410,18 +410,31 @@ def _cover(m: np.ndarray, circle: tuple[float, float, float]) -> float:
 def _pick(m: np.ndarray, found: list[tuple[float, float, float] | None], sigma: float
           ) -> tuple[float, float, float] | None:
     """Of the circles found from several starts, the first unless another has RESTART_GAIN
-    times its edge weight (`edge_support`), among those whose disc mostly shows a change
-    (COVER_MIN; all of them when none does)."""
+    times its edge weight (`edge_support`) or its rim stands PICK_RING_GAIN times as far out
+    (`imprint.ring_contrast`), among those whose disc mostly shows a change (COVER_MIN; all of
+    them when none does)."""
+    from .imprint import ring_contrast
+
     cands = [c for c in found if c is not None]
     if not cands:
         return None
     covered = [c for c in cands if _cover(m, c) >= COVER_MIN] or cands
     best, score = covered[0], RESTART_GAIN * edge_support(m, covered[0], sigma)
+    z = ring_contrast(m, best)
     for c in covered[1:]:
-        sc = edge_support(m, c, sigma)
-        if sc > score:
-            best, score = c, sc
+        sc, zc = edge_support(m, c, sigma), ring_contrast(m, c)
+        if sc > score or zc >= PICK_RING_GAIN * z:
+            best, score, z = c, sc, zc
     return best
+
+
+#: A later start's circle replaces the first when its rim stands this many times as far out of
+#: the change around it. A circle on one bright lobe of a deep press (its outside still the
+#: contact) keeps as much edge support as the contact's circle but stands out a quarter as
+#: much (a simulated press under four side lights: 15.5 against 56 robust deviations); on 342
+#: other simulated presses of every light layout the two starts' contrasts are 0.72-1.02 times
+#: each other, and no circle of the real press sets or their variants changes.
+PICK_RING_GAIN = 2.0
 
 
 def _component_fit(m: np.ndarray, sigma: float, min_radius_px: float, rr: tuple[float, float]

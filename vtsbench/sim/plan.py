@@ -258,10 +258,13 @@ def _moving_scene_v2(obj: ObjectInstance, motion: Motion, state: str,
 
 
 def press_scene(rng: np.random.Generator, size: tuple[int, int], mm_per_px: float,
-                generator: int = 1, appearance: Appearance | None = None) -> Scene:
-    """A calibration press: the smooth ball at a random depth, its contact inside the frame."""
+                generator: int = 1, appearance: Appearance | None = None,
+                depth_mm: float | None = None) -> Scene:
+    """A calibration press: the smooth ball at a random depth (or depth_mm, drawing nothing for
+    it), its contact inside the frame."""
     height, width = size
-    depth = float(rng.uniform(PRESS_DEPTH_MM[0], max_press_depth_mm(size, mm_per_px)))
+    depth = float(rng.uniform(PRESS_DEPTH_MM[0], max_press_depth_mm(size, mm_per_px))) \
+        if depth_mm is None else float(depth_mm)
     reach = (ball_contact_radius_mm(depth) + PRESS_CLEARANCE_MM) / mm_per_px
     cx = float(rng.uniform(min(reach, (width - 1) / 2), max(reach, width - 1 - reach)))
     cy = float(rng.uniform(min(reach, (height - 1) / 2), max(reach, height - 1 - reach)))
