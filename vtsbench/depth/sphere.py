@@ -338,12 +338,12 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     geometric least-squares fit to the inliers, three times from the new centre. Of the two
     circles, the one with the most edge weight on it (`edge_support`) among those whose disc
     mostly shows a change is kept (the component's unless the other has RESTART_GAIN times its
-    edge weight, or a rim that stands PICK_RING_GAIN times as far out: `_pick`). When neither start gives a circle whose rim stands RING_Z_MIN robust
-    deviations out of the change around it (`imprint.ring_contrast`; a background taken under
-    another light leaves a texture in which only the imprint's brightest lobe stands out, and a
-    circle fitted to the texture does not pass), the disc search is run again at each of
-    `imprint.TEXTURE_LEVELS`, and the circle whose rim stands out most replaces the first when
-    its rim does pass.
+    edge weight, or a rim that stands PICK_RING_GAIN times as far out: `_pick`). When neither
+    start gives a circle whose rim stands RING_Z_MIN robust deviations out of the change around
+    it (`imprint.ring_contrast`; a background taken under another light leaves a texture in
+    which only the imprint's brightest lobe stands out, and a circle fitted to the texture does
+    not pass), the disc search is run again at each of `imprint.TEXTURE_LEVELS`, and the circle
+    whose rim stands out most replaces the first when its rim does pass.
     ball_px: the ball radius in pixels (without it, any radius from
     min_radius_px). start: a first guess (x, y, r) instead of the two starts (what calibration
     retries with when the first circle fails its check). restarts: fit again from 8 starts
