@@ -423,7 +423,7 @@ def _pick(m: np.ndarray, found: list[tuple[float, float, float] | None], sigma: 
     z = ring_contrast(m, best)
     for c in covered[1:]:
         sc, zc = edge_support(m, c, sigma), ring_contrast(m, c)
-        if sc > score or zc >= PICK_RING_GAIN * z:
+        if sc > score or (zc > 0 and zc >= PICK_RING_GAIN * z):  # z <= 0: no rim at all
             best, score, z = c, sc, zc
     return best
 
