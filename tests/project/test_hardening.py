@@ -395,16 +395,19 @@ def _children(pid: int) -> list[int]:
 
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs /proc")
 def test_kill_9_of_a_build_leaves_no_worker(rec: Path, tmp_path: Path) -> None:
-    proc = subprocess.Popen([sys.executable, "-m", "vtsbench", "build", str(rec),
-                             str(tmp_path / "o"), "--workers", "2", "--quiet"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    err = tmp_path / "stderr.txt"
+    with open(err, "wb") as fh:
+        proc = subprocess.Popen([sys.executable, "-m", "vtsbench", "build", str(rec),
+                                 str(tmp_path / "o"), "--workers", "2", "--quiet"],
+                                stdout=subprocess.DEVNULL, stderr=fh)
     workers: list[int] = []
     deadline = time.time() + 60
-    while time.time() < deadline and len(workers) < 2:
-        time.sleep(0.2)
+    while time.time() < deadline and len(workers) < 2 and proc.poll() is None:
+        time.sleep(0.1)
         workers = [c for c in _children(proc.pid)
                    if b"resource_tracker" not in Path(f"/proc/{c}/cmdline").read_bytes()]
-    assert len(workers) >= 2, "the build started no workers"
+    assert len(workers) >= 2, (f"the build started no workers (exit {proc.poll()}): "
+                               f"{err.read_text(errors='replace')[-2000:]}")
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     deadline = time.time() + 15
