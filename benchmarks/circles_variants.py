@@ -122,6 +122,16 @@ def marker_layer() -> np.ndarray | None:
     return np.clip(g.astype(np.float32) / np.maximum(cv2.medianBlur(g, 31), 1), 0.0, 1.0)
 
 
+def _u8(a: np.ndarray) -> np.ndarray:
+    """Light values rounded to an 8-bit frame (clipped to 0-255)."""
+    return np.clip(a, 0, 255).round().astype(np.uint8)
+
+
+def _same(c: Label, hw: tuple[int, int]) -> Label:
+    """A circle of a variant that moves no pixel."""
+    return c
+
+
 def variant(s: PressSet, how: str, layer: np.ndarray | None) -> PressSet | None:
     """The variant `how` of a press set (None when it cannot be built here)."""
     import cv2
@@ -149,18 +159,17 @@ def variant(s: PressSet, how: str, layer: np.ndarray | None) -> PressSet | None:
             _, buf = cv2.imencode(".jpg", a, [cv2.IMWRITE_JPEG_QUALITY, 75])
             return cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
 
-        return s.map(jpeg, lambda c, hw: c)
+        return s.map(jpeg, _same)
     if how == "swap":  # the colour channels in the other order (RGB read as BGR)
-        return s.map(lambda a: np.ascontiguousarray(a[..., ::-1]), lambda c, hw: c)
+        return s.map(lambda a: np.ascontiguousarray(a[..., ::-1]), _same)
     if how == "dim":  # a darker exposure: 0.6 times the light, then an 8-bit camera's gamma
         return s.map(lambda a: (255 * (0.6 * (a / 255.0) ** 2.2) ** (1 / 2.2)).round()
-                     .astype(np.uint8), lambda c, hw: c)
+                     .astype(np.uint8), _same)
     if how == "noise":  # a noisier camera: Gaussian noise of 4 DN, drawn afresh for each frame
         rng = np.random.default_rng(11)
-        return s.map(lambda a: np.clip(a + rng.normal(0, NOISE_DN, a.shape), 0, 255).round()
-                     .astype(np.uint8), lambda c, hw: c)
+        return s.map(lambda a: _u8(a + rng.normal(0, NOISE_DN, a.shape)), _same)
     if how == "blur":  # a camera out of focus: a Gaussian of BLUR_PX
-        return s.map(lambda a: cv2.GaussianBlur(a, (0, 0), BLUR_PX), lambda c, hw: c)
+        return s.map(lambda a: cv2.GaussianBlur(a, (0, 0), BLUR_PX), _same)
     if how == "vignette":  # a lens that darkens the corners to VIGNETTE of the centre
         def vignette(a: np.ndarray) -> np.ndarray:
             h, w = a.shape[:2]
@@ -168,16 +177,14 @@ def variant(s: PressSet, how: str, layer: np.ndarray | None) -> PressSet | None:
             rho2 = ((xx - (w - 1) / 2) ** 2 + (yy - (h - 1) / 2) ** 2) / (((w - 1) / 2) ** 2
                                                                         + ((h - 1) / 2) ** 2)
             fall = 1 - (1 - VIGNETTE) * rho2
-            return np.clip(a * fall[..., None], 0, 255).round().astype(np.uint8)
+            return _u8(a * fall[..., None])
 
-        return s.map(vignette, lambda c, hw: c)
+        return s.map(vignette, _same)
     if how == "balance":  # another white balance: red up, blue down, every frame alike
         gain = np.array(BALANCE, np.float32)[::-1]  # frames are BGR, as written
-        return s.map(lambda a: np.clip(a * gain, 0, 255).round().astype(np.uint8),
-                     lambda c, hw: c)
+        return s.map(lambda a: _u8(a * gain), _same)
     if how == "exposure":  # auto exposure: the presses EXPOSURE times as bright as the background
-        out = s.map(lambda a: np.clip(a * EXPOSURE, 0, 255).round().astype(np.uint8),
-                    lambda c, hw: c)
+        out = s.map(lambda a: _u8(a * EXPOSURE), _same)
         return PressSet(out.name, out.images, s.bg, out.labels, out.mm_per_px, out.ball_mm,
                         out.factor, out.fwd)
     if "-" in how:  # several in turn
@@ -191,16 +198,14 @@ def variant(s: PressSet, how: str, layer: np.ndarray | None) -> PressSet | None:
         if layer is None:
             return None
         lay = _marker_grid(s, layer)[..., None]
-        return s.map(lambda a: np.clip(a * lay, 0, 255).round().astype(np.uint8),
-                     lambda c, hw: c)
+        return s.map(lambda a: _u8(a * lay), _same)
     if how == "moved":  # markers that move outward in each labelled contact, as a gel flows
         if layer is None:
             return None
         grid = _marker_grid(s, layer)
-        imgs = {k: np.clip(a * flowed(grid, s.labels.get(k))[..., None], 0, 255).round()
-                .astype(np.uint8) for k, a in s.images.items()}
-        return PressSet(s.name, imgs, None if s.bg is None else
-                        np.clip(s.bg * grid[..., None], 0, 255).round().astype(np.uint8),
+        imgs = {k: _u8(a * flowed(grid, s.labels.get(k))[..., None])
+                for k, a in s.images.items()}
+        return PressSet(s.name, imgs, None if s.bg is None else _u8(s.bg * grid[..., None]),
                         s.labels, s.mm_per_px, s.ball_mm, s.factor, s.fwd)
     raise SystemExit(f"unknown variant {how!r} (use {', '.join(VARIANTS)})")
 
