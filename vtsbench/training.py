@@ -350,8 +350,8 @@ def train_loop(model: torch.nn.Module, loss_fn: LossFn, dataset: Any, out_dir: s
         return collate(read_items(dataset, batch_indices(len(dataset), step, cfg.batch_size,
                                                          seed, rank, world)))
 
-    pool = ThreadPoolExecutor(1, "vtsbench-prefetch") if (
-        dev.type == "cuda" if prefetch is None else prefetch) else None
+    ahead = dev.type == "cuda" if prefetch is None else prefetch
+    pool = ThreadPoolExecutor(1, "vtsbench-prefetch") if ahead else None
     pending = pool.submit(fetch, start) if pool is not None and start < cfg.steps else None
     try:
         for step in range(start, cfg.steps):
