@@ -55,3 +55,18 @@ def test_consistent_centres_bring_moved_labels_back(tmp_path) -> None:
     assert err.max() < 1.2, err  # the others stay put
     with pytest.raises(ValueError, match="at least 30 presses"):
         consistent_centres(start[:10], bg, setup)
+
+
+def test_symmetric_centre_on_a_disc_wider_than_opencv_maps_one_row() -> None:
+    """A disc of 150 px holds 70,000 pixels, beyond the 32,767 OpenCV's remap takes along a
+    side; the search still finds the centre of a point-symmetric ring from 5 px off."""
+    from vtsbench.depth.centres import symmetric_centre
+
+    h, w, cx, cy = 600, 700, 340.25, 290.5
+    yy, xx = np.mgrid[:h, :w].astype(np.float32)
+    rho = np.hypot(xx - cx, yy - cy)
+    m = (np.exp(-((rho - 100) / 8) ** 2) + 0.3 * np.exp(-(rho / 40) ** 2)).astype(np.float32)
+    m += 0.5 * np.exp(-((xx - cx - 70) ** 2 + (yy - cy) ** 2) / 200)  # a lobe, and its twin
+    m += 0.5 * np.exp(-((xx - cx + 70) ** 2 + (yy - cy) ** 2) / 200)
+    sx, sy = symmetric_centre(m, cx + 4.0, cy - 3.0, 150.0)
+    assert math.hypot(sx - cx, sy - cy) <= 0.3

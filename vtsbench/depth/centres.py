@@ -111,16 +111,15 @@ def symmetric_centre(m: np.ndarray, x: float, y: float, radius: float, span: flo
     import cv2
 
     g = np.arange(-math.ceil(radius), math.ceil(radius) + 1, dtype=np.float32)
-    u, v = np.meshgrid(g, g)
+    u, v = np.meshgrid(g, g)  # a square map (OpenCV's remap takes under 32767 per side)
     disc = np.hypot(u, v) <= radius
-    u, v = u[disc][None, :], v[disc][None, :]
 
     def asymmetry(cx: float, cy: float) -> float:
         a = cv2.remap(m, np.float32(cx) + u, np.float32(cy) + v, cv2.INTER_LINEAR,
                       borderMode=cv2.BORDER_REFLECT)
         b = cv2.remap(m, np.float32(cx) - u, np.float32(cy) - v, cv2.INTER_LINEAR,
                       borderMode=cv2.BORDER_REFLECT)
-        return float(np.mean((a - b) ** 2))
+        return float(np.mean((a[disc] - b[disc]) ** 2))
 
     best = (x, y)
     for step, reach in ((1.0, span), (0.25, 1.0)):
