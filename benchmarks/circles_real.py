@@ -36,6 +36,25 @@ NAMES = {"label": "labelled", "detect": "detected"}
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
 
 
+
+def label_frame(lab: np.ndarray, det: np.ndarray) -> tuple[float, float]:
+    """Labels read as drawn in a frame scaled and shifted from the image's (det = s lab + t:
+    one scale, a shift per axis): the scale fitted to every press, and the share of detections
+    within 3 px of their label carried by a frame fitted to the other presses alone (a
+    diagnostic of the labelling; nothing uses it)."""
+    def fit(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        n = len(a)
+        m = np.zeros((2 * n, 3))
+        m[:n, 0], m[n:, 0], m[:n, 1], m[n:, 2] = a[:, 0], a[:, 1], 1.0, 1.0
+        return np.linalg.lstsq(m, np.r_[b[:, 0], b[:, 1]], rcond=None)[0]
+
+    hits = []
+    for i in range(len(lab)):
+        keep = np.arange(len(lab)) != i
+        s, tx, ty = fit(lab[keep], det[keep])
+        hits.append(np.hypot(*(s * lab[i] + (tx, ty) - det[i])) <= 3)
+    return float(fit(lab, det)[0]), float(np.mean(hits))
+
 def recordings(tmp: Path, digit_px_per_mm: float) -> list[tuple[str, Path, dict]]:
     """(name, recordings folder, load_presses options) of each real set present."""
     from typer.testing import CliRunner
@@ -123,14 +142,19 @@ def table(name: str, rs: list[dict], show_all: bool) -> None:
     print(f"{name}: {bad} of {n} unclamped labels beyond 3 px or 10 % of the detection")
     # A label convention (a constant offset) is not a per-press error: the mean offset, and how
     # many centres lie within 3 px once it is taken off (a diagnostic; nothing uses it).
+    have = [r for r in rs if "centre_px" in r]
     v = np.array([(r["detected"]["x"] - r["label"]["x"], r["detected"]["y"] - r["label"]["y"])
-                  for r in rs if "centre_px" in r])
+                  for r in have])
     if len(v):
         mean = v.mean(axis=0)
         raw, off = (np.hypot(*v.T) <= 3).mean(), (np.hypot(*(v - mean).T) <= 3).mean()
         print(f"{name}: detection - label, mean ({mean[0]:+.2f}, {mean[1]:+.2f}) px, sd "
               f"({v[:, 0].std():.2f}, {v[:, 1].std():.2f}); within 3 px {raw:.0%}, "
               f"{off:.0%} with the mean offset taken off")
+        lab = np.array([(r["label"]["x"], r["label"]["y"]) for r in have])
+        scale, within = label_frame(lab, lab + v)
+        print(f"{name}: labels as a frame scaled by {scale:.4f} and shifted: {within:.0%} within "
+              f"3 px when each press's frame is fitted to the other presses (leave-one-out)")
 
 
 def held_out_rmse(folder: Path, opts: dict, ref: dict[str, tuple[float, float]],

@@ -12,8 +12,11 @@ JPEG-compressed, in turn, and with markers that move: the grid moved outward in 
 contact as a gel flows under a press (FLOW_AT_RIM of the radius at the rim), alone and rotated
 then JPEG-compressed; and other cameras: noisier (NOISE_DN), out of focus (BLUR_PX), with a
 vignette (VIGNETTE), another white balance (BALANCE) and an auto exposure that brightens the
-presses but not the background (EXPOSURE; DIGIT's background is estimated from the presses,
-so there every frame is brighter alike). Per set and variant, one row: presses used and dropped
+presses but not the background (EXPOSURE; DIGIT's background is estimated from the presses, so
+there every frame is brighter alike); and a marker gel at a higher resolution, where the dots
+span more pixels: the grid moved, at 2x, and at 2.5x rotated then JPEG-compressed (a portrait
+frame of about 400x300 with contacts of about 42 px). Any variants joined by "-" are applied in
+turn (`--variants x1.25-mirror-noise`). Per set and variant, one row: presses used and dropped
 (`calibrate --circles detect`), the detected circles against the labels (centre distance, median
 and share within 3 px of the variant's pixels, and in the set's own pixels; radius error after
 the 0.97 R clamp both get, median and share within 10 %; the share within both), and the
@@ -48,7 +51,7 @@ from circles_real import REAL, held_out_rmse
 
 VARIANTS = ("base", "rot90", "mirror", "x0.5", "x1.5", "x2", "jpeg75", "markers", "swap", "dim",
             "rot90-markers-jpeg75", "moved", "rot90-moved-jpeg75", "noise", "blur", "vignette",
-            "balance", "exposure")
+            "balance", "exposure", "x2-moved", "x2.5-rot90-moved-jpeg75")
 #: Other cameras: noise (DN, per pixel and channel), defocus (Gaussian sigma, px), corners
 #: darkened to this share of the centre's light; a white balance (R, G, B gains) and an auto
 #: exposure that makes the presses brighter than the background by this factor.
@@ -138,6 +141,13 @@ def variant(s: PressSet, how: str, layer: np.ndarray | None) -> PressSet | None:
 
     if how == "base":
         return s
+    if "-" in how:  # several in turn
+        for part in how.split("-"):
+            v = variant(s, part, layer)
+            if v is None:
+                return None
+            s = v
+        return s
     if how == "rot90":  # counter-clockwise: column x, row y -> column y, row W - 1 - x
         return s.map(lambda a: np.ascontiguousarray(np.rot90(a)),
                       lambda c, hw: (c[1], hw[1] - 1 - c[0], c[2]))
@@ -187,13 +197,6 @@ def variant(s: PressSet, how: str, layer: np.ndarray | None) -> PressSet | None:
         out = s.map(lambda a: _u8(a * EXPOSURE), _same)
         return PressSet(out.name, out.images, s.bg, out.labels, out.mm_per_px, out.ball_mm,
                         out.factor, out.fwd)
-    if "-" in how:  # several in turn
-        for part in how.split("-"):
-            v = variant(s, part, layer)
-            if v is None:
-                return None
-            s = v
-        return s
     if how == "markers":
         if layer is None:
             return None

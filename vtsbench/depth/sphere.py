@@ -343,7 +343,10 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     it (`imprint.ring_contrast`; a background taken under another light leaves a texture in
     which only the imprint's brightest lobe stands out, and a circle fitted to the texture does
     not pass), the disc search is run again at each of `imprint.TEXTURE_LEVELS`, and the circle
-    whose rim stands out most replaces the first when its rim does pass.
+    whose rim stands out most replaces the first when its rim does pass. On a marker gel whose
+    dots are wider than DOT_SIGMA_DIV times the blur, all this runs on a map blurred by the
+    dots' diameter over DOT_SIGMA_DIV, and the circle is then settled on the usual map
+    (`_settle`).
     ball_px: the ball radius in pixels (without it, any radius from
     min_radius_px). start: a first guess (x, y, r) instead of the two starts (what calibration
     retries with when the first circle fails its check). restarts: fit again from 8 starts
@@ -352,6 +355,24 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
     """
     if sigma is None:
         sigma = default_sigma(image.shape[:2])
+        spec, _ = _background_dots(background)
+        if spec is not None and spec.diameter_px / DOT_SIGMA_DIV > sigma:
+            # a marker gel: the circle on a map blurred in proportion to its dots, settled on
+            # the usual map, unless the usual map's own circle has a rim that stands out
+            # PICK_RING_GAIN times as far there (a faint contact the blur spread below the
+            # noise)
+            kw = {"min_radius_px": min_radius_px, "start": start, "ball_px": ball_px,
+                  "restarts": restarts}
+            found = detect_circle(image, background, sigma=spec.diameter_px / DOT_SIGMA_DIV,
+                                  **kw)
+            usual = detect_circle(image, background, sigma=sigma, **kw)
+            if found is None or usual is None:
+                return usual if found is None else _settle(
+                    change_map(image, background, sigma, markers=True), found, sigma)
+            m = change_map(image, background, sigma, markers=True)
+            found = _settle(m, found, sigma)
+            zu = ring_contrast(m, usual)
+            return usual if zu > 0 and zu >= PICK_RING_GAIN * ring_contrast(m, found) else found
     m = change_map(image, background, sigma, markers=True)
     rr = radius_range(ball_px, min_radius_px, m.shape)
     if start is not None:
@@ -374,6 +395,50 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
             if z >= best:
                 found, best = textured, z
     return found
+
+
+#: On a marker gel the change map the circle is found on is blurred by at least the dots'
+#: diameter over DOT_SIGMA_DIV: what a held or moved dot leaves at its rim (`imprint.change_map`)
+#: is as wide as the dot is, so the same share of blur treats a grid alike at any resolution.
+#: With the usual 1 px, the real sets with a real grid moved outward in each contact
+#: (`benchmarks/circles_variants.py`) put circles up to 8.1 px (Taxim at 2x) and 4.8 px (DIGIT)
+#: off the set's own detections; at 1/14, within 3.0 and 2.9 px. At 1/10 and 1/8 the blur
+#: moved DIGIT's circles more (1/8: one 17 px off), and Taxim's dots, 10.6 px at its recorded
+#: scale, keep its 1 px there.
+DOT_SIGMA_DIV = 14.0
+
+#: `_settle`: how far (share of the radius) the finer map's rim may lie from the blurred map's
+#: circle, and how far its centre may move.
+SETTLE_BAND, SETTLE_MOVE = 0.2, 0.15
+
+
+def _settle(m: np.ndarray, circle: tuple[float, float, float], sigma: float
+            ) -> tuple[float, float, float]:
+    """A circle found on a blurrier map, settled on the finer map `m`: the radius is the
+    weighted median of the edge points (`_ray_edges`) within SETTLE_BAND of it, then a geometric
+    fit to the points on that radius, three times; a fit that moves the centre beyond
+    SETTLE_MOVE of the radius (a dot's rim, not the contact's) keeps the centre. A blur moves
+    a rim outward (a contact of 27 px by about 10 % under a blur of 2.8 px); the centre, where
+    the rim is found all round, hardly moves."""
+    cx, cy, r = circle
+    x0, y0 = cx, cy
+    for _ in range(3):
+        px, py, wt = _ray_edges(m, cx, cy, 1.5 * r, sigma)
+        rad = np.hypot(px - cx, py - cy)
+        near = np.abs(rad - r) <= SETTLE_BAND * r
+        if near.sum() < 12:
+            break
+        order = np.argsort(rad[near])
+        cum = np.cumsum(wt[near][order])
+        r = float(rad[near][order][np.searchsorted(cum, cum[-1] / 2)])
+        on = np.abs(rad - r) <= ring_tol(r)
+        if on.sum() < 12:
+            break
+        nx, ny, nr = refine_circle(px[on], py[on], wt[on], (cx, cy, r))
+        if math.hypot(nx - x0, ny - y0) > SETTLE_MOVE * r or abs(nr - r) > SETTLE_BAND * r:
+            break
+        cx, cy, r = nx, ny, nr
+    return cx, cy, r
 
 
 #: A circle found only at a texture level (`imprint.TEXTURE_LEVELS`) is kept when the change
