@@ -31,6 +31,7 @@ from the label and within 3 px of the detection.
 
     .venv/bin/python benchmarks/circles_variants.py [--seeds 0,1,2] [--only taxim,digit]
                                                     [--variants base,rot90,...] [--no-rmse]
+    .venv/bin/python benchmarks/circles_variants.py --speed --variants base,markers,x2-moved
 """
 
 from __future__ import annotations
@@ -338,18 +339,54 @@ def print_row(name: str, how: str, r: dict, took: float) -> None:
           f"{took:.0f} s |", flush=True)
 
 
+def speed(s: PressSet, how: str, presses: int = 12, rounds: int = 3) -> str:
+    """One row: the time of a detection on the first presses of a variant, the usual map alone
+    (the blur of `default_sigma`) against the whole detector, which on a marker gel with wide
+    dots also finds the circle on a map blurred in proportion to them (`sphere.DOT_SIGMA_DIV`);
+    ms a press, best of `rounds` alternated rounds."""
+    from vtsbench.depth.sphere import ball_radius_px, default_sigma, detect_circle
+
+    imgs = list(s.images.values())
+    bg = s.bg if s.bg is not None else np.median(np.stack(imgs), axis=0).astype(np.uint8)
+    ball = ball_radius_px(s.ball_mm, s.mm_per_px)
+    imgs = imgs[:presses]
+    usual = {"sigma": default_sigma(bg.shape[:2])}
+    detect_circle(imgs[0], bg, ball_px=ball)  # the background's dots found once
+    best = {"usual": math.inf, "whole": math.inf}
+    for _ in range(rounds):
+        for name, kw in (("usual", usual), ("whole", {})):
+            t0 = time.perf_counter()
+            for im in imgs:
+                detect_circle(im, bg, ball_px=ball, **kw)
+            best[name] = min(best[name], (time.perf_counter() - t0) / len(imgs) * 1000)
+    h, w = bg.shape[:2]
+    return (f"| {s.name} | {how} | {h}x{w} | {best['usual']:.0f} | {best['whole']:.0f} | "
+            f"{best['whole'] / best['usual']:.2f}x |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0,1,2", help="hold-out seeds pooled for the RMSE")
     ap.add_argument("--no-rmse", action="store_true", help="circles only, no calibration")
     ap.add_argument("--only", default="", help="sets, e.g. taxim,digit")
     ap.add_argument("--variants", default=",".join(VARIANTS))
+    ap.add_argument("--speed", action="store_true",
+                    help="detection time, the usual map alone against the whole detector")
     args = ap.parse_args()
     seeds = None if args.no_rmse else tuple(int(s) for s in args.seeds.split(","))
     sets = [s for s in real_sets() if not args.only or s.name in args.only.split(",")]
     if not sets:
         raise SystemExit(f"no real press sets under {REAL}")
     layer = marker_layer()
+    if args.speed:
+        print("| set | variant | frame | usual map, ms a press | whole detector | ratio |")
+        print("|---|---|---|---:|---:|---:|")
+        for s in sets:
+            for how in args.variants.split(","):
+                v = variant(s, how, layer)
+                if v is not None:
+                    print(speed(v, how), flush=True)
+        return
     print("| set | variant | used | dropped | centre - label, median px (set's px) | within 3 px "
           "(set's px) | radius, median | within 10 % | both | beyond 3 px: label off its "
           "imprint | centre - as recorded, median / max (set's px) | held-out RMSE mm, "
