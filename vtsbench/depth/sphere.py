@@ -366,11 +366,12 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
             found = detect_circle(image, background, sigma=spec.diameter_px / DOT_SIGMA_DIV,
                                   **kw)
             usual = detect_circle(image, background, sigma=sigma, **kw)
-            if found is None or usual is None:
-                return usual if found is None else _settle(
-                    change_map(image, background, sigma, markers=True), found, sigma)
+            if found is None:
+                return usual
             m = change_map(image, background, sigma, markers=True)
             found = _settle(m, found, sigma)
+            if usual is None:
+                return found
             zu = ring_contrast(m, usual)
             return usual if zu > 0 and zu >= PICK_RING_GAIN * ring_contrast(m, found) else found
     m = change_map(image, background, sigma, markers=True)
