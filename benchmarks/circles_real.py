@@ -36,7 +36,6 @@ NAMES = {"label": "labelled", "detect": "detected"}
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
 
 
-
 def label_frame(lab: np.ndarray, det: np.ndarray) -> tuple[float, float]:
     """Labels read as drawn in a frame scaled and shifted from the image's (det = s lab + t:
     one scale, a shift per axis): the scale fitted to every press, and the share of detections
@@ -54,6 +53,7 @@ def label_frame(lab: np.ndarray, det: np.ndarray) -> tuple[float, float]:
         s, tx, ty = fit(lab[keep], det[keep])
         hits.append(np.hypot(*(s * lab[i] + (tx, ty) - det[i])) <= 3)
     return float(fit(lab, det)[0]), float(np.mean(hits))
+
 
 def recordings(tmp: Path, digit_px_per_mm: float) -> list[tuple[str, Path, dict]]:
     """(name, recordings folder, load_presses options) of each real set present."""

@@ -262,7 +262,7 @@ def _sim_press(lights: str, shape: tuple[int, int], r_over_ball: float, mm_per_p
     from vtsbench.sim.appearance import background, sensor_appearance
     from vtsbench.sim.objects import BALL, BALL_RADIUS_MM, random_instance
     from vtsbench.sim.optics import Capture, sensor
-    from vtsbench.sim.plan import _generation
+    from vtsbench.sim.plan import _generation, ball_contact_radius_mm
     from vtsbench.sim.relight import relight
     from vtsbench.sim.scene import Effects, Scene
     from vtsbench.sim.scene import render as render_scene
@@ -274,7 +274,7 @@ def _sim_press(lights: str, shape: tuple[int, int], r_over_ball: float, mm_per_p
     rng = np.random.default_rng(seed)
     big = BALL_RADIUS_MM
     depth = big - math.sqrt(big**2 - (r_over_ball * big) ** 2)
-    reach = math.sqrt(2 * big * depth - depth**2) / mm_per_px + 6
+    reach = ball_contact_radius_mm(depth) / mm_per_px + 6
     x = float(rng.uniform(reach, shape[1] - 1 - reach))
     y = float(rng.uniform(reach, shape[0] - 1 - reach))
     scene = _generation(Scene(random_instance(BALL, rng), ((x, y),), (depth,), shape, mm_per_px,

@@ -361,20 +361,27 @@ def detect_circle(image: np.ndarray, background: np.ndarray, *, sigma: float | N
             # the usual map, unless the usual map's own circle has a rim that stands out
             # PICK_RING_GAIN times as far there (a faint contact the blur spread below the
             # noise)
-            kw = {"min_radius_px": min_radius_px, "start": start, "ball_px": ball_px,
-                  "restarts": restarts}
-            found = detect_circle(image, background, sigma=spec.diameter_px / DOT_SIGMA_DIV,
-                                  **kw)
-            usual = detect_circle(image, background, sigma=sigma, **kw)
+            wide = spec.diameter_px / DOT_SIGMA_DIV
+            found = _search(change_map(image, background, wide, markers=True), wide,
+                            min_radius_px, start, ball_px, restarts)
+            m = change_map(image, background, sigma, markers=True)
+            usual = _search(m, sigma, min_radius_px, start, ball_px, restarts)
             if found is None:
                 return usual
-            m = change_map(image, background, sigma, markers=True)
             found = _settle(m, found, sigma)
             if usual is None:
                 return found
             zu = ring_contrast(m, usual)
             return usual if zu > 0 and zu >= PICK_RING_GAIN * ring_contrast(m, found) else found
-    m = change_map(image, background, sigma, markers=True)
+    return _search(change_map(image, background, sigma, markers=True), sigma, min_radius_px,
+                   start, ball_px, restarts)
+
+
+def _search(m: np.ndarray, sigma: float, min_radius_px: float,
+            start: tuple[float, float, float] | None, ball_px: float | None, restarts: bool
+            ) -> tuple[float, float, float] | None:
+    """The contact circle on the change map `m` (blurred by sigma), or None: the starts, the
+    pick, the restarts and the texture levels of `detect_circle`."""
     rr = radius_range(ball_px, min_radius_px, m.shape)
     if start is not None:
         found = _fit_rays(m, *start, sigma, rr)
@@ -479,8 +486,6 @@ def _pick(m: np.ndarray, found: list[tuple[float, float, float] | None], sigma: 
     times its edge weight (`edge_support`) or its rim stands PICK_RING_GAIN times as far out
     (`imprint.ring_contrast`), among those whose disc mostly shows a change (COVER_MIN; all of
     them when none does)."""
-    from .imprint import ring_contrast
-
     cands = [c for c in found if c is not None]
     if not cands:
         return None
