@@ -21,6 +21,7 @@ from vtsbench.depth.calibration import (
 )
 from vtsbench.depth.markers import (
     DOT_MIN_TRANSMISSION,
+    corrected,
     detect_markers,
     dot_correction,
     fill_gradients,
@@ -227,6 +228,45 @@ def test_detect_markers_on_a_grid_and_not_on_plain_gel() -> None:
     truth = dot_layer(h, w, mm) < 0.95
     assert m[truth].mean() > 0.98  # every dot pixel masked ...
     assert m.mean() < 2.5 * truth.mean()  # ... and not much else
+
+
+def test_the_fit_leaves_out_what_the_run_time_corrects_not_a_dark_lobe_beside_a_dot() -> None:
+    """A press's dark blob can be a dot merged with a dark lobe of the imprint (the simulator's
+    three coloured lights: 455 of a contact's 2460 px). `marker_mask` of the press takes the
+    lobe for part of a dot; `corrected`, what the fit leaves out, takes only what the run time
+    divides or fills: the background's dots, where a moved dot went, what is filled."""
+    rng = np.random.default_rng(5)
+    h, w, mm = 120, 160, 0.06
+    gel = np.full((h, w, 3), (150, 120, 100), np.float64) + rng.normal(0, 1.0, (h, w, 3))
+    layer = dot_layer(h, w, mm)
+    bg = np.clip(gel * layer[..., None], 0, 255).astype(np.uint8)
+    spec = detect_markers(bg, mm, grow_px=2)
+    assert spec is not None
+    base = marker_mask(bg, spec)
+    trans = transmission(bg, spec)
+    # a dark lobe (0.6 of the light) a little larger than a dot, touching the dot nearest
+    # (80, 60)
+    ys, xs = np.nonzero(layer == layer.min())
+    k = np.argmin(np.hypot(xs - 80, ys - 60))
+    r = 0.55 * spec.diameter_px
+    cx, cy = xs[k] + spec.diameter_px / 2 + 0.9 * r, ys[k]
+    yy, xx = np.mgrid[:h, :w]
+    lobe = np.hypot(xx - cx, yy - cy) <= r
+    press = np.clip(gel * layer[..., None] * np.where(lobe, 0.6, 1.0)[..., None], 0, 255
+                    ).astype(np.uint8)
+    merged = marker_mask(press, spec, bg)
+    away = lobe & ~base
+    assert away.sum() > 20 and merged[away].mean() > 0.9  # the press's blob takes the lobe
+    fit_out = corrected(dot_correction(press, spec, bg, trans), base)
+    # the dot's own pixels stay out; of the lobe only what the run time's following of the
+    # dot (pulled by the lobe) divides: here about a third
+    assert fit_out[base].all() and fit_out[away].mean() < 0.5
+    # dots slid by 3 px (under half a dot) are followed: where they went is left out too
+    slid = np.roll(layer, 3, axis=1)
+    moved = np.clip(gel * slid[..., None], 0, 255).astype(np.uint8)
+    went = (slid < 0.9) & ~base
+    assert went.any()
+    assert corrected(dot_correction(moved, spec, bg, trans), base)[went].all()
 
 
 def test_harmonic_fill_is_exact_on_a_linear_field() -> None:

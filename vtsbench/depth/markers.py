@@ -14,8 +14,8 @@ the flat gel around a press carry their pattern. So:
    the gel under a press) with the same test, keeps the blobs of the calibrated size, joins the
    dots of the background (the colour difference is disturbed there too) and grows the result
    by the dots' soft edge and the feature blur.
-3. Calibration leaves the masked pixels out of the training samples (divided back, they would
-   carry more noise than the gel between them).
+3. Calibration leaves out of the training samples the pixels the run time divides or fills
+   (step 4, `corrected`): divided back, they would carry more noise than the gel between them.
 4. At run time a dot is a multiplier on the light, in the frame as in the background: where
    it has not moved, `dot_correction` divides the colour difference by the dot's transmission
    per channel (`transmission`: the background over its harmonic fill across the dots), so
@@ -349,6 +349,15 @@ def dot_correction(images: np.ndarray, spec: MarkerSpec, background: np.ndarray,
         return DotCorrection(np.broadcast_to(base_gain, arr.shape), fill.reshape(*lead, h, w))
     return DotCorrection(gain.reshape(arr.shape), fill.reshape(*lead, h, w),
                          offset.reshape(arr.shape))
+
+
+def corrected(corr: DotCorrection, background_dots: np.ndarray) -> np.ndarray:
+    """(..., H, W) bool: what a fit should not learn from, the pixels a correction touches:
+    the background's grown dots (`marker_mask` of the background alone), where a moved dot
+    went (its gain is not 1) and what is filled. Unlike `marker_mask` of a press it takes no
+    dark blob of the press for a dot where no dot of the background lies or moved: such a blob
+    can be a dot merged with a dark lobe of the imprint, which the run time leaves as it is."""
+    return background_dots | (np.asarray(corr.gain) != 1.0).any(axis=-1) | corr.fill
 
 
 def fill_gradients(g: np.ndarray, mask: np.ndarray) -> np.ndarray:
