@@ -21,7 +21,7 @@ from typer.testing import CliRunner
 from tests.fixtures.hostile import HOSTILE, TYPED, mutate_json
 from vtsbench.cli import app
 
-FUZZ_SECONDS = float(os.environ.get("VTSBENCH_FUZZ_SECONDS", "4"))
+FUZZ_SECONDS = float(os.environ.get("VTSBENCH_FUZZ_SECONDS", "2"))
 
 
 def mutate_csv(data: bytes, rng: random.Random) -> bytes:

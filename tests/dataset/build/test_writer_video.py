@@ -65,11 +65,14 @@ def test_the_same_takes_give_the_same_bytes(ffv1_ds: Path, tmp_path: Path) -> No
 
 
 def test_a_failure_at_every_write_and_rename_then_resume(
-        ffv1_ds: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    eps = video_takes(depth=True)
-    steps = count_renames(monkeypatch, lambda: write_video_takes(
-        tmp_path / "count" / "ds", eps, "ffv1", name="ds"))
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # two takes hold every kind of kill point (a take's shards, its video, its metadata, a
+    # shard the next take goes on writing, the finish); a third would repeat them
+    eps = video_takes(depth=True)[:2]
+    whole = tmp_path / "count" / "ds"
+    steps = count_renames(monkeypatch, lambda: write_video_takes(whole, eps, "ffv1", name="ds"))
     assert steps > 10
+    ref = tree_bytes(whole)
     for at in range(1, steps + 1):
         out = tmp_path / f"run{at}" / "ds"
         monkeypatch.setattr(atomic, "os", FailingOs(at))
@@ -80,7 +83,7 @@ def test_a_failure_at_every_write_and_rename_then_resume(
         for p in (partial_path(out) / VIDEOS_DIR).glob("episode-*"):
             probe(p)  # a video under its name is whole
         again = write_video_takes(out, eps, "ffv1", name="ds", resume=True)
-        assert tree_bytes(again) == tree_bytes(ffv1_ds), f"step {at}: other bytes"
+        assert tree_bytes(again) == ref, f"step {at}: other bytes"
 
 
 def test_a_kill_mid_encode_leaves_a_hidden_file_that_resume_deletes(
