@@ -257,7 +257,11 @@ def test_the_fit_leaves_out_what_the_run_time_corrects_not_a_dark_lobe_beside_a_
     merged = marker_mask(press, spec, bg)
     away = lobe & ~base
     assert away.sum() > 20 and merged[away].mean() > 0.9  # the press's blob takes the lobe
-    fit_out = corrected(dot_correction(press, spec, bg, trans), base)
+    corr = dot_correction(press, spec, bg, trans)
+    assert np.array_equal(corr.dots, base)  # the correction carries the dots it was made from
+    given = dot_correction(press, spec, bg, trans, base)  # the same with them given
+    assert np.array_equal(given.fill, corr.fill) and np.array_equal(given.gain, corr.gain)
+    fit_out = corrected(corr)
     # the dot's own pixels stay out; of the lobe only what the run time's following of the
     # dot (pulled by the lobe) divides: here about a third
     assert fit_out[base].all() and fit_out[away].mean() < 0.5
@@ -266,7 +270,7 @@ def test_the_fit_leaves_out_what_the_run_time_corrects_not_a_dark_lobe_beside_a_
     moved = np.clip(gel * slid[..., None], 0, 255).astype(np.uint8)
     went = (slid < 0.9) & ~base
     assert went.any()
-    assert corrected(dot_correction(moved, spec, bg, trans), base)[went].all()
+    assert corrected(dot_correction(moved, spec, bg, trans))[went].all()
 
 
 def test_harmonic_fill_is_exact_on_a_linear_field() -> None:

@@ -113,10 +113,11 @@ class Calibration:
         followed, and the pixels to fill in the gradients where that cannot be done: a dot's
         darkest core, a dot that moved and cannot be followed)."""
         assert self.markers is not None
-        trans = self.__dict__.get("_transmission")
-        if trans is None:
-            trans = self.__dict__["_transmission"] = transmission(self.background, self.markers)
-        return dot_correction(images, self.markers, self.background, trans)
+        cached = self.__dict__.get("_dots")
+        if cached is None:  # the background's: found once
+            cached = self.__dict__["_dots"] = (transmission(self.background, self.markers),
+                                               marker_mask(self.background, self.markers))
+        return dot_correction(images, self.markers, self.background, *cached)
 
     def gradients(self, images: np.ndarray) -> np.ndarray:
         """(p, q) = (dz/dx, dz/dy) as (..., H, W, 2) float32 for RGB images (..., H, W, 3).
@@ -674,7 +675,7 @@ def training_samples(presses: list[Press], background: np.ndarray, scale: tuple[
         f = sphere_fields((h, w), p.x, p.y, p.r, p.ball_radius_mm, scale, rim)
         diff = colour_difference(p.image, background, blur_px)
         dots = None if markers is None else corrected(
-            dot_correction(p.image, markers, background, trans), base)
+            dot_correction(p.image, markers, background, trans, base))
         for sel, n_max, is_cap in ((f.trusted, CAP_SAMPLES, True), (f.flat, FLAT_SAMPLES, False)):
             if dots is not None:
                 sel = sel & ~dots

@@ -214,10 +214,12 @@ class DotCorrection:
     """How a marker gel's dots come out of the colour difference of frames (..., H, W, 3):
     (frame - background) * gain + offset is the difference the gel would show without them,
     and fill (..., H, W) marks the pixels where that cannot be done (to fill in the gradients).
-    offset is None where no dot was followed (then it is 0)."""
+    dots (H, W) are the background's grown dots the correction was made from (`marker_mask` of
+    the background alone). offset is None where no dot was followed (then it is 0)."""
 
     gain: np.ndarray
     fill: np.ndarray
+    dots: np.ndarray
     offset: np.ndarray | None = None
 
     def apply(self, diff: np.ndarray) -> np.ndarray:
@@ -265,7 +267,7 @@ def _follow(t_f: np.ndarray, t_bg: np.ndarray, region: np.ndarray, max_px: float
 
 
 def dot_correction(images: np.ndarray, spec: MarkerSpec, background: np.ndarray,
-                   trans: np.ndarray) -> DotCorrection:
+                   trans: np.ndarray, dots: np.ndarray | None = None) -> DotCorrection:
     """The correction (`DotCorrection`) of RGB frames (..., H, W, 3) on a marker gel.
 
     A dot multiplies the light of the frame and of the background alike, so where it has not
@@ -275,13 +277,15 @@ def dot_correction(images: np.ndarray, spec: MarkerSpec, background: np.ndarray,
     frame is divided by the shifted transmission and the background's dot-free level taken
     off (gain and offset). Filled: a dot's core darker than DOT_MIN_TRANSMISSION (where it
     lies in the frame); whole, every moved dot that cannot be followed and every dot of the
-    frame away from the background's; all grown by spec.grow_px (the feature blur's reach)."""
+    frame away from the background's; all grown by spec.grow_px (the feature blur's reach).
+    dots, the background's grown dots (`marker_mask` of it alone), are found when not given."""
     import cv2
 
     arr = np.asarray(images)
     lead, (h, w) = arr.shape[:-3], arr.shape[-3:-1]
     frames = arr.reshape(-1, h, w, arr.shape[-1])
-    dots = marker_mask(background, spec)  # the grown dots: their rim is dot-free gel
+    if dots is None:
+        dots = marker_mask(background, spec)  # the grown dots: their rim is dot-free gel
     n, labels, stats, _ = cv2.connectedComponentsWithStats(dots.view(np.uint8), connectivity=8,
                                                            ltype=cv2.CV_32S)
     t_bg = trans.mean(axis=-1)
@@ -346,18 +350,19 @@ def dot_correction(images: np.ndarray, spec: MarkerSpec, background: np.ndarray,
         hole = moved[labels] | ~touch[fl] | hole_dark
         fill[k] = cv2.dilate(hole.view(np.uint8), kernel).view(bool)
     if gain is None:
-        return DotCorrection(np.broadcast_to(base_gain, arr.shape), fill.reshape(*lead, h, w))
-    return DotCorrection(gain.reshape(arr.shape), fill.reshape(*lead, h, w),
+        return DotCorrection(np.broadcast_to(base_gain, arr.shape), fill.reshape(*lead, h, w),
+                             dots)
+    return DotCorrection(gain.reshape(arr.shape), fill.reshape(*lead, h, w), dots,
                          offset.reshape(arr.shape))
 
 
-def corrected(corr: DotCorrection, background_dots: np.ndarray) -> np.ndarray:
+def corrected(corr: DotCorrection) -> np.ndarray:
     """(..., H, W) bool: what a fit should not learn from, the pixels a correction touches:
-    the background's grown dots (`marker_mask` of the background alone), where a moved dot
+    the background's grown dots (`DotCorrection.dots`), where a moved dot
     went (its gain is not 1) and what is filled. Unlike `marker_mask` of a press it takes no
     dark blob of the press for a dot where no dot of the background lies or moved: such a blob
     can be a dot merged with a dark lobe of the imprint, which the run time leaves as it is."""
-    return background_dots | (np.asarray(corr.gain) != 1.0).any(axis=-1) | corr.fill
+    return corr.dots | (np.asarray(corr.gain) != 1.0).any(axis=-1) | corr.fill
 
 
 def fill_gradients(g: np.ndarray, mask: np.ndarray) -> np.ndarray:
