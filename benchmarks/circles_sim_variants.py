@@ -19,7 +19,8 @@ With --deep, circles only: the same ball at a coarser scale (46 px in radius) pr
 contacts of 0.5, 0.7, 0.85 and 0.95 of its radius (`DEEP_FRACS`), every layout, gel and frame.
 
     nice -n 15 .venv/bin/python benchmarks/circles_sim_variants.py [--presses 16] [--folds 4]
-        [--lights zones3,sides4,uniform] [--method poly] [--seed 0] [--deep]
+        [--lights zones3,sides4,uniform] [--method poly] [--seed 0] [--jpeg gel|none|Q|lo-hi]
+        [--colour 420|444] [--deep]
 """
 
 from __future__ import annotations
@@ -199,6 +200,24 @@ def deep(lights: list[str], seed: int) -> None:
     print(f"\nMachine: {machine()}")
 
 
+def full_colour_jpeg() -> None:
+    """The simulated camera's JPEG with its colour at full resolution (4:4:4): the simulator's
+    `camera.jpeg` replaced for this run."""
+    import cv2
+
+    from vtsbench.sim import camera
+
+    def jpeg(frame: np.ndarray, quality: int) -> np.ndarray:
+        ok, buf = cv2.imencode(".jpg", cv2.cvtColor(frame, cv2.COLOR_RGB2BGR),
+                               [cv2.IMWRITE_JPEG_QUALITY, int(quality),
+                                cv2.IMWRITE_JPEG_SAMPLING_FACTOR,
+                                cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444])
+        assert ok
+        return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+
+    camera.jpeg = jpeg
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--presses", type=int, default=16)
@@ -211,9 +230,14 @@ def main() -> None:
     ap.add_argument("--jpeg", type=jpeg_arg, default="gel",
                     help="the camera's JPEG quality: gel (the marker gel's own, 60-90), none, a "
                          "quality (90) or a range (60-90)")
+    ap.add_argument("--colour", choices=("420", "444"), default="420",
+                    help="the camera's JPEG colour resolution: 420 (half, libjpeg's default "
+                         "and most cameras') or 444 (full)")
     ap.add_argument("--deep", action="store_true",
                     help="circles only, on presses of 0.5-0.95 ball radii (DEEP_FRACS)")
     args = ap.parse_args()
+    if args.colour == "444":
+        full_colour_jpeg()
     if args.deep:
         deep(args.lights.split(","), args.seed)
         return
@@ -221,7 +245,7 @@ def main() -> None:
     held = f"{held_n} held out" if args.folds <= 1 else \
         f"each held out once in {args.folds} folds"
     print(f"{args.presses} simulated presses of a 3 mm ball a variant at {MM_PER_PX} mm/px, "
-          f"{held}, {args.method}, seed {args.seed}, JPEG {args.jpeg}\n")
+          f"{held}, {args.method}, seed {args.seed}, JPEG {args.jpeg} colour {args.colour}\n")
     print("| lights | gel | frame | used | dropped | centre error px, median / max | radius "
           "error, median / max | within 3 px and 10 % | markers found | held-out RMSE mm, "
           "exact circles | detected | ratio | x without markers (exact / detected) | time |")

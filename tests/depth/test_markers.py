@@ -80,6 +80,21 @@ def test_marker_gel_depth_within_1_2x_of_the_same_presses_without(folders) -> No
     assert [h.reference for h in run.held_out] == ["truth", "truth"]
     assert held_rmse(run) <= 1.2 * held_rmse(base)
     assert held_rmse(off) > 1.5 * held_rmse(base)  # left in, the dots are learnt as slopes
+    assert not any("recorded with" in w for w in run.warnings)  # PNG: full-resolution colour
+
+
+def test_a_marker_gel_in_subsampled_colour_is_warned_of(folders, monkeypatch) -> None:
+    """Press files whose colour is subsampled (JPEG 4:2:0, most video) get one warning on a
+    marker gel, naming a file; a plain gel so recorded gets none (nothing to spread)."""
+    import vtsbench.recordings.media as media
+
+    plain, marked, _ = folders
+    monkeypatch.setattr(media, "chroma_subsampling", lambda p: "4:2:0")
+    kw = {"method": "lut", "holdout": 2, "seed": 1, "device": None,
+          "options": {"bins": 16, "cells": 2}}
+    notes = [w for w in calibrate(marked, **kw).warnings if "recorded with 4:2:0" in w]
+    assert len(notes) == 1 and ".png" in notes[0]
+    assert not any("recorded with" in w for w in calibrate(plain, **kw).warnings)
 
 
 def test_dots_that_move_under_each_press_are_followed(folders, tmp_path, monkeypatch) -> None:

@@ -101,6 +101,31 @@ def frame_notes(path: Path) -> list[str]:
     return inspect_frame(path)[1]
 
 
+#: FFmpeg pixel formats' subsampling tags and what they are called.
+_SUBSAMPLED = (("420", "4:2:0"), ("422", "4:2:2"), ("411", "4:1:1"), ("410", "4:1:0"))
+
+
+def chroma_subsampling(path: Path) -> str | None:
+    """"4:2:0", "4:2:2", ... when an image or video file (or an image folder's first frame)
+    stores its colour at a lower resolution than its brightness, as most JPEG cameras and video
+    codecs do; None for full-resolution colour (PNG, JPEG 4:4:4, raw) or when FFmpeg's probe
+    (PyAV) cannot tell. Only the header is read."""
+    import av
+
+    if path.is_dir():
+        files = folder_frames(path)
+        if not files:
+            return None
+        path = files[0]
+    try:
+        with quiet_decoding(), av.open(str(path)) as c:
+            streams = c.streams.video
+            fmt = str(streams[0].codec_context.pix_fmt or "") if streams else ""
+    except (av.FFmpegError, OSError, ValueError):
+        return None
+    return next((name for tag, name in _SUBSAMPLED if tag in fmt), None)
+
+
 def inspect_frame(path: Path) -> tuple[tuple[int, int] | None, list[str]]:
     """The size (H, W) an image file is read at (None when it does not decode) and its
     `frame_notes`, from one read of the file."""
