@@ -1,5 +1,6 @@
-"""Start-up time of the command line: `vtsbench --help` against `python -c pass` (the floor
-any Python command pays), alternated in one run so machine noise hits both alike.
+"""Start-up time of the command line: `vtsbench --version` (what every command pays before its
+work), `--help` and a command's help against `python -c pass` (the floor any Python command
+pays), alternated in one run so machine noise hits them alike.
 
     .venv/bin/python benchmarks/cli_start.py --repeat 10
 """
@@ -16,6 +17,7 @@ from machine import machine  # benchmarks/machine.py: the shared machine line
 
 COMMANDS = {
     "python -c pass": [sys.executable, "-c", "pass"],
+    "vtsbench --version": [sys.executable, "-m", "vtsbench", "--version"],  # no help drawn
     "vtsbench --help": [sys.executable, "-m", "vtsbench", "--help"],
     "vtsbench build -h": [sys.executable, "-m", "vtsbench", "build", "-h"],
 }

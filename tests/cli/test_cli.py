@@ -1,5 +1,6 @@
 """The command line starts light and answers help for every command."""
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -17,6 +18,20 @@ def test_start_up_imports_nothing_heavy() -> None:
             f"print(','.join(m for m in {HEAVY!r} if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == ""
+
+
+def test_start_up_leaves_the_help_renderer_until_help_is_shown() -> None:
+    """typer's rich_utils (rich's markdown and columns, about 0.3 s) is imported when help is
+    rendered, not when the command line is built; rendered, it folds a long word rather than
+    cutting it."""
+    code = ("import sys\nfrom vtsbench.cli import app\n"
+            "print('BEFORE', 'typer.rich_utils' in sys.modules)\n"
+            "try:\n    app(['build', '--help'], prog_name='vtsbench')\nexcept SystemExit:\n"
+            "    pass\nprint('AFTER', 'typer.rich_utils' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, env={**os.environ, "COLUMNS": "50"})
+    assert "BEFORE False" in out.stdout and "AFTER True" in out.stdout
+    assert "…" not in out.stdout  # the fold is installed before the first help
 
 
 def test_help_runs_without_heavy_imports() -> None:

@@ -10,9 +10,9 @@ from typing import Annotated
 import typer
 
 from . import dataset, depth, episodes, evaluate, recipes, recordings, stream
-from .help import install as _install_help
+from .help import install_lazily
 
-_install_help()
+install_lazily()
 
 app = typer.Typer(
     name="vtsbench",

@@ -1,7 +1,9 @@
 """`--help` that wraps to the terminal and never cuts: typer's rich help ellipsises a word
 longer than its column (a path, an option's example) and keeps the docstrings' line breaks,
 which break mid-sentence at any width but the source's. Two small adjustments of typer's
-rich_utils (typer 0.2x), applied once when the command line is built."""
+rich_utils (typer 0.2x), applied when help is first rendered (`install_lazily`): importing
+rich_utils costs about 0.3 s (rich's markdown and columns), which a command that shows no help
+need not pay."""
 
 from __future__ import annotations
 
@@ -64,3 +66,21 @@ def install() -> None:
     rich_utils.Table = FoldTable  # type: ignore[misc]
     rich_utils._fix_linebreaks = fix_linebreaks  # type: ignore[assignment]
     rich_utils._vtsbench_help = True  # type: ignore[attr-defined]
+
+
+def install_lazily() -> None:
+    """Make typer's help rendering (a group's and a command's `format_help`) call `install`
+    first, so that rich_utils is imported only when help is shown."""
+    from typer import core
+
+    for cls in (core.TyperGroup, core.TyperCommand):
+        orig = cls.format_help
+        if getattr(orig, "_vtsbench_lazy", False):
+            continue
+
+        def format_help(self: Any, ctx: Any, formatter: Any, _orig: Any = orig) -> None:
+            install()
+            return _orig(self, ctx, formatter)
+
+        format_help._vtsbench_lazy = True  # type: ignore[attr-defined]
+        cls.format_help = format_help  # type: ignore[method-assign]
