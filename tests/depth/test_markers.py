@@ -344,3 +344,20 @@ def test_build_depth_of_a_marker_gel_is_the_calibrations(folders) -> None:
             if has_dots:  # the dots left in the difference show in the depth
                 raw = DepthMaker(dataclasses.replace(cal, markers=None)).depth(img, "dct")
                 assert float(np.abs(raw - maker.depth(img, "dct")).max()) > 0.02
+
+
+def test_harmonic_fill_factorises_a_mask_once_and_keeps_few() -> None:
+    """A mask seen again (a gel's dots in every frame) reuses its factorised system, with the
+    same values as a fresh one; other masks get their own, and only _SYSTEMS_MAX are kept."""
+    from vtsbench.depth import markers as mk
+
+    rng = np.random.default_rng(3)
+    m = rng.random((40, 50)) < 0.25
+    g1, g2 = (rng.normal(size=(40, 50, 2)).astype(np.float32) for _ in range(2))
+    first = mk._laplace(m)
+    assert mk._laplace(m.copy()) is first  # by content, not identity
+    for g in (g1, g2):
+        np.testing.assert_array_equal(mk._harmonic(g, m), mk._Laplace(m).solve(g))
+    for k in range(mk._SYSTEMS_MAX + 2):
+        mk._harmonic(g1, rng.random((40, 50)) < 0.1 + 0.02 * k)
+    assert len(mk._SYSTEMS) == mk._SYSTEMS_MAX and mk._laplace(m) is not first

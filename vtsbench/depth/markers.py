@@ -36,7 +36,10 @@ the fill.
 
 from __future__ import annotations
 
+import hashlib
 import math
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
@@ -382,31 +385,72 @@ def fill_gradients(g: np.ndarray, mask: np.ndarray) -> np.ndarray:
 
 def _harmonic(g: np.ndarray, m: np.ndarray) -> np.ndarray:
     """(n, C) harmonic values at the n masked pixels of one frame (H, W, C) (float32)."""
-    import scipy.sparse
-    import scipy.sparse.linalg
+    return _laplace(m).solve(g)
 
-    h, w = m.shape
-    ys, xs = np.nonzero(m)
-    n = ys.size
-    index = np.full((h, w), -1, np.int64)
-    index[ys, xs] = np.arange(n)
-    diag = np.full(n, 1e-9)  # a hole without unmasked neighbours is held at 0
-    rhs = np.zeros((n, g.shape[-1]))
-    rows, cols = [], []
-    ids = np.arange(n)
-    for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
-        ny, nx = ys + dy, xs + dx
-        inside = (ny >= 0) & (ny < h) & (nx >= 0) & (nx < w)
-        i, ny, nx = ids[inside], ny[inside], nx[inside]
-        diag[i] += 1.0
-        nb = index[ny, nx]
-        hole = nb >= 0
-        rows.append(i[hole])
-        cols.append(nb[hole])
-        np.add.at(rhs, i[~hole], g[ny[~hole], nx[~hole]].astype(np.float64))
-    r, c = np.concatenate(rows), np.concatenate(cols)
-    a = scipy.sparse.csc_matrix((np.concatenate([diag, -np.ones(r.size)]),
-                                 (np.concatenate([ids, r]), np.concatenate([ids, c]))),
-                                shape=(n, n))
-    out = scipy.sparse.linalg.splu(a).solve(rhs)
-    return out.astype(np.float32)
+
+class _Laplace:
+    """Laplace's equation (5-point) over the masked pixels of one (H, W) mask, the unmasked
+    neighbours as the boundary: the sparse matrix factorised once (SuperLU), solved for any
+    frame's boundary values."""
+
+    def __init__(self, m: np.ndarray) -> None:
+        import scipy.sparse
+        import scipy.sparse.linalg
+
+        h, w = m.shape
+        ys, xs = np.nonzero(m)
+        n = self.n = ys.size
+        index = np.full((h, w), -1, np.int64)
+        index[ys, xs] = np.arange(n)
+        diag = np.full(n, 1e-9)  # a hole without unmasked neighbours is held at 0
+        rows, cols, b_i, b_y, b_x = [], [], [], [], []
+        ids = np.arange(n)
+        for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+            ny, nx = ys + dy, xs + dx
+            inside = (ny >= 0) & (ny < h) & (nx >= 0) & (nx < w)
+            i, ny, nx = ids[inside], ny[inside], nx[inside]
+            diag[i] += 1.0
+            nb = index[ny, nx]
+            hole = nb >= 0
+            rows.append(i[hole])
+            cols.append(nb[hole])
+            b_i.append(i[~hole])
+            b_y.append(ny[~hole])
+            b_x.append(nx[~hole])
+        r, c = np.concatenate(rows), np.concatenate(cols)
+        a = scipy.sparse.csc_matrix((np.concatenate([diag, -np.ones(r.size)]),
+                                     (np.concatenate([ids, r]), np.concatenate([ids, c]))),
+                                    shape=(n, n))
+        self.lu = scipy.sparse.linalg.splu(a)
+        self.b_i, self.b_y, self.b_x = (np.concatenate(v) for v in (b_i, b_y, b_x))
+
+    def solve(self, g: np.ndarray) -> np.ndarray:
+        """(n, C) float32: the harmonic values for a frame (H, W, C)."""
+        vals = g[self.b_y, self.b_x].astype(np.float64)
+        rhs = np.stack([np.bincount(self.b_i, vals[:, k], self.n)
+                        for k in range(vals.shape[1])], axis=1)
+        return self.lu.solve(rhs).astype(np.float32)
+
+
+#: Factorised systems kept, most recently used last: a marker gel's background dots (the same in
+#: every frame) and its fill masks (the same in frames whose dots did not move). Refactorising
+#: per frame was 300 of the 470 ms of `dot_correction` on a 480x640 frame with 19 % dots.
+_SYSTEMS: OrderedDict[tuple[tuple[int, ...], bytes], _Laplace] = OrderedDict()
+_SYSTEMS_MAX = 4
+_SYSTEMS_LOCK = threading.Lock()
+
+
+def _laplace(m: np.ndarray) -> _Laplace:
+    """The factorised system of mask m, from _SYSTEMS when the same mask was seen lately."""
+    key = (m.shape, hashlib.blake2b(np.packbits(m).tobytes(), digest_size=16).digest())
+    with _SYSTEMS_LOCK:
+        hit = _SYSTEMS.get(key)
+        if hit is not None:
+            _SYSTEMS.move_to_end(key)
+            return hit
+    system = _Laplace(np.ascontiguousarray(m, bool))
+    with _SYSTEMS_LOCK:
+        _SYSTEMS[key] = system
+        while len(_SYSTEMS) > _SYSTEMS_MAX:
+            _SYSTEMS.popitem(last=False)
+    return system
