@@ -20,7 +20,7 @@ contacts of 0.5, 0.7, 0.85 and 0.95 of its radius (`DEEP_FRACS`), every layout, 
 
     nice -n 15 .venv/bin/python benchmarks/circles_sim_variants.py [--presses 16] [--folds 4]
         [--lights zones3,sides4,uniform] [--method poly] [--seed 0] [--jpeg gel|none|Q|lo-hi]
-        [--colour 420|444] [--deep]
+        [--colour 420|422|444] [--deep]
 """
 
 from __future__ import annotations
@@ -200,18 +200,20 @@ def deep(lights: list[str], seed: int) -> None:
     print(f"\nMachine: {machine()}")
 
 
-def full_colour_jpeg() -> None:
-    """The simulated camera's JPEG with its colour at full resolution (4:4:4): the simulator's
-    `camera.jpeg` replaced for this run."""
+def colour_jpeg(sampling: str) -> None:
+    """The simulated camera's JPEG with its colour at another resolution ("422" or "444"):
+    the simulator's `camera.jpeg` replaced for this run."""
     import cv2
 
     from vtsbench.sim import camera
 
+    flag = {"422": cv2.IMWRITE_JPEG_SAMPLING_FACTOR_422,
+            "444": cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444}[sampling]
+
     def jpeg(frame: np.ndarray, quality: int) -> np.ndarray:
         ok, buf = cv2.imencode(".jpg", cv2.cvtColor(frame, cv2.COLOR_RGB2BGR),
                                [cv2.IMWRITE_JPEG_QUALITY, int(quality),
-                                cv2.IMWRITE_JPEG_SAMPLING_FACTOR,
-                                cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444])
+                                cv2.IMWRITE_JPEG_SAMPLING_FACTOR, flag])
         assert ok
         return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
 
@@ -230,14 +232,14 @@ def main() -> None:
     ap.add_argument("--jpeg", type=jpeg_arg, default="gel",
                     help="the camera's JPEG quality: gel (the marker gel's own, 60-90), none, a "
                          "quality (90) or a range (60-90)")
-    ap.add_argument("--colour", choices=("420", "444"), default="420",
-                    help="the camera's JPEG colour resolution: 420 (half, libjpeg's default "
-                         "and most cameras') or 444 (full)")
+    ap.add_argument("--colour", choices=("420", "422", "444"), default="420",
+                    help="the camera's JPEG colour resolution: 420 (half each way, libjpeg's "
+                         "default), 422 (half across, many USB cameras' MJPEG) or 444 (full)")
     ap.add_argument("--deep", action="store_true",
                     help="circles only, on presses of 0.5-0.95 ball radii (DEEP_FRACS)")
     args = ap.parse_args()
-    if args.colour == "444":
-        full_colour_jpeg()
+    if args.colour != "420":
+        colour_jpeg(args.colour)
     if args.deep:
         deep(args.lights.split(","), args.seed)
         return
