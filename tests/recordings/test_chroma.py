@@ -52,6 +52,8 @@ def test_chroma_subsampling_of_each_kind_of_file(files: dict[str, Path], kind: s
 def test_the_note_names_a_subsampled_file_and_stays_quiet_otherwise(
         files: dict[str, Path]) -> None:
     assert subsampled_colour_note({"a": files["png"], "b": files["444"]}) is None
+    # half the colour across only costs a marker gel what full colour does: no warning
+    assert subsampled_colour_note({"a": files["422"]}) is None
     note = subsampled_colour_note({"a": files["png"], "b": files["420"], "c": files["420"]})
     assert note is not None and "4:2:0" in note and "1 of 2 press files" in note
     assert "a420.jpg" in note and "\n" not in note

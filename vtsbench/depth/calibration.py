@@ -442,24 +442,31 @@ class CalibrationRun:
         return self.held_out or self.train_examples
 
 
+#: Colour subsampling that costs a marker gel's depth (4:2:2, half the colour across only,
+#: measured as 4:4:4 does: 1.11-1.15x on the simulated gels at JPEG 75; docs/depth.md).
+HARMLESS_SUBSAMPLING = frozenset({"4:2:2"})
+
+
 def subsampled_colour_note(sources: dict[str, Path]) -> str | None:
     """A warning when a marker gel's press files store colour at a lower resolution than
-    brightness (`media.chroma_subsampling`: JPEG 4:2:0, most video codecs): a dark dot's colour
-    then spreads over the codec's 16 px blocks, which the dot correction cannot take out
-    (docs/depth.md, simulated marker gels: 1.22-1.29x the depth RMSE of the same presses
-    without dots at JPEG quality 75 4:2:0, 1.13-1.14x at 4:4:4); None when none does."""
+    brightness both ways (`media.chroma_subsampling`: JPEG 4:2:0, most video codecs): a dark
+    dot's colour then spreads over the codec's 16 px blocks, which the dot correction cannot
+    take out (docs/depth.md, simulated marker gels: 1.22-1.29x the depth RMSE of the same
+    presses without dots at JPEG quality 75 4:2:0, 1.11-1.15x at 4:2:2 and 4:4:4); None when
+    none does."""
     from ..recordings.media import chroma_subsampling
 
     paths = sorted(set(sources.values()))
-    found = [(p, k) for p in paths if (k := chroma_subsampling(p)) is not None]
+    found = [(p, k) for p in paths
+             if (k := chroma_subsampling(p)) is not None and k not in HARMLESS_SUBSAMPLING]
     if not found:
         return None
     kinds = ", ".join(sorted({k for _, k in found}))
     return (f"marker gel recorded with {kinds} colour ({len(found)} of {len(paths)} press "
             f"files, e.g. {found[0][0].name}): the dots' colour spreads over the codec's "
             "blocks and costs depth accuracy (simulated gels at JPEG 75: 1.22-1.29x the error "
-            "without dots, 1.13-1.14x at 4:4:4); record PNG, or JPEG 4:4:4 where the camera "
-            "allows")
+            "without dots, 1.11-1.15x at 4:2:2 or 4:4:4); record PNG, or JPEG 4:4:4 or 4:2:2 "
+            "where the camera allows")
 
 
 def _press_frame(root: Path, e: Any) -> np.ndarray:
