@@ -31,12 +31,11 @@ from .mapping import METHODS, Mapping, fit_mapping, mapping_from_arrays
 from .markers import (
     DotCorrection,
     MarkerSpec,
+    background_dots,
     corrected,
     detect_markers,
     dot_correction,
     fill_gradients,
-    marker_mask,
-    transmission,
 )
 from .sphere import Rim, ball_radius_px, circle_doubts, detect_circle, sphere_fields
 
@@ -115,8 +114,7 @@ class Calibration:
         assert self.markers is not None
         cached = self.__dict__.get("_dots")
         if cached is None:  # the background's: found once
-            cached = self.__dict__["_dots"] = (transmission(self.background, self.markers),
-                                               marker_mask(self.background, self.markers))
+            cached = self.__dict__["_dots"] = background_dots(self.background, self.markers)
         return dot_correction(images, self.markers, self.background, *cached)
 
     def gradients(self, images: np.ndarray) -> np.ndarray:
@@ -695,9 +693,7 @@ def training_samples(presses: list[Press], background: np.ndarray, scale: tuple[
 
     h, w = background.shape[:2]
     xn, yn = norm_xy(h, w)
-    trans = base = None
-    if markers is not None:
-        trans, base = transmission(background, markers), marker_mask(background, markers)
+    trans, base = (None, None) if markers is None else background_dots(background, markers)
     cols, xys, tgts, caps = [], [], [], []
     for p in presses:
         f = sphere_fields((h, w), p.x, p.y, p.r, p.ball_radius_mm, scale, rim)

@@ -189,17 +189,28 @@ def marker_mask(images: np.ndarray, spec: MarkerSpec,
 DOT_MIN_TRANSMISSION = 0.2
 
 
-def transmission(background: np.ndarray, spec: MarkerSpec) -> np.ndarray:
+def transmission(background: np.ndarray, spec: MarkerSpec,
+                 dots: np.ndarray | None = None) -> np.ndarray:
     """(H, W, 3) float32 share of the light each background pixel passes per channel: the
     background over its dot-free level (the harmonic fill of the background over its grown
-    dots), clipped to (0, 1]; exactly 1 off the dots."""
+    dots), clipped to (0, 1]; exactly 1 off the dots. dots: the background's grown dots
+    (`marker_mask` of it alone), found when not given."""
     bg = np.asarray(background, np.float32)
-    dots = marker_mask(background, spec)
+    if dots is None:
+        dots = marker_mask(background, spec)
     out = np.ones(bg.shape, np.float32)
     if dots.any():
         level = np.maximum(_harmonic(bg, dots), 1.0)
         out[dots] = np.clip(bg[dots] / level, 1e-3, 1.0)
     return out
+
+
+def background_dots(background: np.ndarray, spec: MarkerSpec
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """(transmission, grown dots) of the background: what every `dot_correction` of frames
+    against it takes, found once."""
+    dots = marker_mask(background, spec)
+    return transmission(background, spec, dots), dots
 
 
 #: A dot of the background has moved in a frame when the frame's own transmission there (the
