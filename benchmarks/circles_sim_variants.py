@@ -202,22 +202,16 @@ def deep(lights: list[str], seed: int) -> None:
 
 def colour_jpeg(sampling: str) -> None:
     """The simulated camera's JPEG with its colour at another resolution ("422" or "444"):
-    the simulator's `camera.jpeg` replaced for this run."""
+    the simulator's `camera.jpeg` given that sampling for this run."""
+    import functools
+
     import cv2
 
     from vtsbench.sim import camera
 
     flag = {"422": cv2.IMWRITE_JPEG_SAMPLING_FACTOR_422,
             "444": cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444}[sampling]
-
-    def jpeg(frame: np.ndarray, quality: int) -> np.ndarray:
-        ok, buf = cv2.imencode(".jpg", cv2.cvtColor(frame, cv2.COLOR_RGB2BGR),
-                               [cv2.IMWRITE_JPEG_QUALITY, int(quality),
-                                cv2.IMWRITE_JPEG_SAMPLING_FACTOR, flag])
-        assert ok
-        return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-
-    camera.jpeg = jpeg
+    camera.jpeg = functools.partial(camera.jpeg, sampling=flag)
 
 
 def main() -> None:

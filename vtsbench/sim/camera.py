@@ -130,12 +130,16 @@ def expose(s: Sensor, capture: Capture, app: Appearance, take: Take, t: int,
     return cv2.multiply(out, (float(g[0]), float(g[1]), float(g[2]), 0.0), dtype=cv2.CV_8U)
 
 
-def jpeg(frame: np.ndarray, quality: int) -> np.ndarray:
-    """Encode and decode an RGB frame through OpenCV's JPEG at `quality`."""
+def jpeg(frame: np.ndarray, quality: int, sampling: int | None = None) -> np.ndarray:
+    """Encode and decode an RGB frame through OpenCV's JPEG at `quality`; sampling: OpenCV's
+    IMWRITE_JPEG_SAMPLING_FACTOR (None: libjpeg's default, the colour at half resolution both
+    ways, 4:2:0)."""
     import cv2
 
-    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(frame, cv2.COLOR_RGB2BGR),
-                           [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    params = [cv2.IMWRITE_JPEG_QUALITY, int(quality)]
+    if sampling is not None:
+        params += [cv2.IMWRITE_JPEG_SAMPLING_FACTOR, int(sampling)]
+    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(frame, cv2.COLOR_RGB2BGR), params)
     if not ok:  # pragma: no cover - libjpeg refuses only invalid arrays
         raise RuntimeError("JPEG encoding failed")
     return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
