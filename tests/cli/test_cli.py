@@ -42,6 +42,27 @@ def test_help_runs_without_heavy_imports() -> None:
     assert "HEAVY=\n" in out.stdout + "\n" and "simulate" in out.stdout
 
 
+def test_only_the_called_command_is_built(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Building a command's parameters costs about 11 ms: the root's help lists every command
+    without building one, a command's help or run builds that command alone, and a typo is
+    still answered with the close names."""
+    from vtsbench.cli.lazy import LazyTyper
+
+    built: list[str] = []
+    build = LazyTyper.build
+    monkeypatch.setattr(LazyTyper, "build", lambda self, name: built.append(name) or
+                        build(self, name))
+    res = CliRunner().invoke(app, ["--help"], env={"COLUMNS": "200"})
+    assert res.exit_code == 0 and built == []
+    assert all(f" {name} " in res.output for name in ("simulate", "build", "collect",
+                                                      "leaderboard"))
+    assert res.output.index(" collect ") < res.output.index(" leaderboard ")  # typer's order
+    res = CliRunner().invoke(app, ["leaderboard", "add", "--help"])
+    assert res.exit_code == 0 and "--dataset" in res.output and built == ["leaderboard", "add"]
+    res = CliRunner().invoke(app, ["buld"])
+    assert res.exit_code == 2 and "Did you mean 'build'" in res.output
+
+
 @pytest.mark.parametrize("cmd", ["simulate", "check", "manifest", "preview", "collect", "calibrate",
                                  "depth", "build", "info", "verify"])
 def test_each_command_has_help(cmd: str) -> None:

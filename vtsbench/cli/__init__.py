@@ -1,6 +1,7 @@
 """The `vtsbench` command: the typer app, its commands registered in the order --help lists
 them, and the console entry point `main`. Start-up imports only typer and the command modules
-(typer and the standard library); every command imports its work when it runs."""
+(typer and the standard library); a command's click parameters are built when it is called
+(`lazy.LazyTyper`), and every command imports its work when it runs."""
 
 from __future__ import annotations
 
@@ -11,10 +12,11 @@ import typer
 
 from . import dataset, depth, episodes, evaluate, recipes, recordings, stream
 from .help import install_lazily
+from .lazy import LazyTyper
 
 install_lazily()
 
-app = typer.Typer(
+app = LazyTyper(
     name="vtsbench",
     help="Benchmark toolkit for visuo-tactile sensing: recordings -> calibrated RGB-D datasets "
          "-> loaders, baselines and scoring.",
@@ -43,32 +45,32 @@ def _root(
     """Options of `vtsbench` itself (the app's help text is the Typer's)."""
 
 
-leaderboard_app = typer.Typer(help="Leaderboards in leaderboards/<dataset>/<split>/: add, "
-                                   "render, rescore.", no_args_is_help=True)
-leaderboard_app.command("add")(evaluate.leaderboard_add)
-leaderboard_app.command("render")(evaluate.leaderboard_render)
-leaderboard_app.command("rescore")(evaluate.leaderboard_rescore)
+leaderboard_app = LazyTyper(help="Leaderboards in leaderboards/<dataset>/<split>/: add, "
+                             "render, rescore.", no_args_is_help=True)
+leaderboard_app.lazy_command("add", evaluate.leaderboard_add)
+leaderboard_app.lazy_command("render", evaluate.leaderboard_render)
+leaderboard_app.lazy_command("rescore", evaluate.leaderboard_rescore)
 
-app.command("simulate")(recordings.simulate)
-app.command("simulate-episodes")(episodes.simulate_episodes)
-app.command("benchmark")(dataset.benchmark)
-app.command("check")(recordings.check)
-app.command("manifest")(recordings.manifest)
-app.command("preview")(recordings.preview)
-app.command("stats")(recordings.stats)
-app.command("build")(dataset.build)
-app.command("info")(dataset.info)
-app.command("verify")(dataset.verify)
-app.command("export-hf")(dataset.export_hf)
-app.command("push")(dataset.push)
-app.command("calibrate")(depth.calibrate)
-app.command("depth")(depth.depth)
-app.command("eval")(evaluate.eval_)
-app.add_typer(leaderboard_app, name="leaderboard")
-app.command("train")(recipes.train)
-app.command("predict")(recipes.predict)
-app.command("stream")(stream.stream)
-app.command("collect")(recordings.collect)
+app.lazy_command("simulate", recordings.simulate)
+app.lazy_command("simulate-episodes", episodes.simulate_episodes)
+app.lazy_command("benchmark", dataset.benchmark)
+app.lazy_command("check", recordings.check)
+app.lazy_command("manifest", recordings.manifest)
+app.lazy_command("preview", recordings.preview)
+app.lazy_command("stats", recordings.stats)
+app.lazy_command("build", dataset.build)
+app.lazy_command("info", dataset.info)
+app.lazy_command("verify", dataset.verify)
+app.lazy_command("export-hf", dataset.export_hf)
+app.lazy_command("push", dataset.push)
+app.lazy_command("calibrate", depth.calibrate)
+app.lazy_command("depth", depth.depth)
+app.lazy_command("eval", evaluate.eval_)
+app.lazy_command("train", recipes.train)
+app.lazy_command("predict", recipes.predict)
+app.lazy_command("stream", stream.stream)
+app.lazy_command("collect", recordings.collect)
+app.lazy_typer("leaderboard", leaderboard_app)
 
 
 def main() -> None:
