@@ -240,9 +240,9 @@ def blur_frame(diff: np.ndarray, sigma: float, weights: np.ndarray | None = None
 def dot_weights(dots: DotCorrection, shape: tuple[int, ...]) -> np.ndarray:
     """(shape) float32 inverse noise variance of the corrected difference, 1 / gain^2 per pixel
     and channel: 1 off the dots. Weighing the blur so, rather than alike, brings the simulated
-    marker gels' held-out depth error (exact circles, 4:2:0 JPEG) from 1.27, 1.23 and 1.25x that
-    of the same presses without ink to 1.24, 1.22 and 1.21x (`benchmarks/circles_sim_variants.py`,
-    docs/depth.md); with 4:4:4 colour, 1.13 to 1.12x."""
+    marker gels' held-out depth error (exact circles) from 1.23-1.27x that of the same presses
+    with ink-less dots to 1.21-1.24x under coloured light (`benchmarks/circles_sim_variants.py`,
+    docs/depth.md)."""
     gain = np.asarray(dots.gain, np.float32)
     return np.broadcast_to(1.0 / (gain * gain), shape).astype(np.float32)
 
