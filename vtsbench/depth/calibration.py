@@ -150,10 +150,7 @@ class Calibration:
             diff = diff * torch.from_numpy(np.array(dots.gain, np.float32)).to(dev)
             if dots.offset is not None:
                 diff = diff + torch.from_numpy(dots.offset).to(dev)
-        if self.blur_px > 0 and fill is not None:  # weighed as `colour_difference` does
-            w = torch.from_numpy(dot_weights(dots, tuple(diff.shape))).to(dev)
-            diff = _blur_torch(diff * w, self.blur_px) / _blur_torch(w, self.blur_px)
-        elif self.blur_px > 0:
+        if self.blur_px > 0:
             diff = _blur_torch(diff, self.blur_px)
         diff = diff.clamp(-self.colour_limit_dn, self.colour_limit_dn)
         g = self.mapping.predict_torch(diff) - zero
@@ -206,45 +203,19 @@ class Calibration:
 def colour_difference(images: np.ndarray, background: np.ndarray, blur_px: float,
                       limit_dn: float = 255.0, dots: DotCorrection | None = None) -> np.ndarray:
     """images - background in float32 DN, with a marker gel's dots taken out when given
-    (`Calibration.dots`), Gaussian-blurred by blur_px, clipped to +-limit_dn.
+    (`Calibration.dots`), Gaussian-blurred by blur_px, clipped to +-limit_dn."""
+    import cv2
 
-    On a marker gel the blur weighs each pixel by its inverse noise variance, 1 / gain^2
-    (`dot_weights`): a pixel divided back by a dot's transmission carries gain times the
-    camera's noise and quantisation."""
     diff = np.asarray(images, np.float32) - background.astype(np.float32)
     if dots is not None:
         dots.apply(diff)
     if blur_px > 0:
         frames = diff.reshape(-1, *diff.shape[-3:])
-        weights = None if dots is None else dot_weights(dots, diff.shape).reshape(frames.shape)
         for k in range(frames.shape[0]):
-            blur_frame(frames[k], blur_px, None if weights is None else weights[k])
+            frames[k] = cv2.GaussianBlur(frames[k], (0, 0), blur_px,
+                                         borderType=cv2.BORDER_REFLECT_101)
     np.clip(diff, -limit_dn, limit_dn, out=diff)
     return diff
-
-
-def blur_frame(diff: np.ndarray, sigma: float, weights: np.ndarray | None = None
-               ) -> np.ndarray:
-    """One frame's difference (H, W, 3) float32 Gaussian-blurred by sigma in place (reflecting
-    at the border); with weights (H, W, 3), their weighted mean under the same kernel."""
-    import cv2
-
-    border = cv2.BORDER_REFLECT_101
-    if weights is None:
-        return cv2.GaussianBlur(diff, (0, 0), sigma, dst=diff, borderType=border)
-    num = cv2.GaussianBlur(diff * weights, (0, 0), sigma, borderType=border)
-    np.divide(num, cv2.GaussianBlur(weights, (0, 0), sigma, borderType=border), out=diff)
-    return diff
-
-
-def dot_weights(dots: DotCorrection, shape: tuple[int, ...]) -> np.ndarray:
-    """(shape) float32 inverse noise variance of the corrected difference, 1 / gain^2 per pixel
-    and channel: 1 off the dots. Weighing the blur so, rather than alike, brings the simulated
-    marker gels' held-out depth error (exact circles) from 1.23-1.27x that of the same presses
-    with ink-less dots to 1.21-1.24x under coloured light (`benchmarks/circles_sim_variants.py`,
-    docs/depth.md)."""
-    gain = np.asarray(dots.gain, np.float32)
-    return np.broadcast_to(1.0 / (gain * gain), shape).astype(np.float32)
 
 
 def _blur_torch(diff: Any, sigma: float) -> Any:

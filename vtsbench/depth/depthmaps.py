@@ -157,20 +157,16 @@ class DepthMaker:
         `gradients` (Calibration.dots)."""
         import cv2
 
-        from .calibration import blur_frame, dot_weights
-
         cal, d = self.cal, self.diff
         # the same float32 values as np.subtract(rgb, bg, dtype=np.float32) (uint8 -> float32 is
         # exact), without numpy's buffered casting of mixed types: 0.30 -> 0.23 ms
         cv2.subtract(rgb, self.bg, dst=d, dtype=cv2.CV_32F)
-        weights = None
         if cal.markers is not None:  # as colour_difference: the dots out, then blurred
             dots = cal.dots(rgb)
             self.fill = dots.fill
             dots.apply(d)
-            weights = dot_weights(dots, d.shape)
         if cal.blur_px > 0:
-            blur_frame(d, cal.blur_px, weights)
+            cv2.GaussianBlur(d, (0, 0), cal.blur_px, dst=d, borderType=cv2.BORDER_REFLECT_101)
         np.clip(d, -cal.colour_limit_dn, cal.colour_limit_dn, out=d)
         return d
 
