@@ -34,6 +34,22 @@ def test_start_up_leaves_the_help_renderer_until_help_is_shown() -> None:
     assert "…" not in out.stdout  # the fold is installed before the first help
 
 
+def test_help_leaves_what_it_does_not_use_to_a_later_import() -> None:
+    """rich's markdown and traceback, which typer's rich_utils imports and our help never uses,
+    are not imported by --help; rich_utils's names for them still give the real classes."""
+    code = ("import sys\nfrom vtsbench.cli import app\n"
+            "try:\n    app(['--help'], prog_name='vtsbench')\nexcept SystemExit:\n    pass\n"
+            "print('LOADED', 'rich.markdown' in sys.modules, 'rich.traceback' in sys.modules)\n"
+            "from typer import rich_utils\nimport rich.markdown, rich.traceback\n"
+            "md = rich_utils._make_rich_text(text='**b**', markup_mode='markdown')\n"
+            "try:\n    1 / 0\nexcept ZeroDivisionError as e:\n"
+            "    tb = rich_utils.Traceback.from_exception(type(e), e, e.__traceback__)\n"
+            "print('REAL', isinstance(md, rich.markdown.Markdown), "
+            "isinstance(tb, rich.traceback.Traceback))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert "LOADED False False" in out.stdout and "REAL True True" in out.stdout, out.stdout
+
+
 def test_help_runs_without_heavy_imports() -> None:
     code = ("import sys\nfrom vtsbench.cli import app\n"
             "try:\n    app(['--help'], prog_name='vtsbench')\nexcept SystemExit:\n    pass\n"

@@ -3,12 +3,56 @@ longer than its column (a path, an option's example) and keeps the docstrings' l
 which break mid-sentence at any width but the source's. Two small adjustments of typer's
 rich_utils (typer 0.2x), applied when help is first rendered (`install_lazily`): importing
 rich_utils costs about 0.3 s (rich's markdown and columns), which a command that shows no help
-need not pay."""
+need not pay; and of what rich_utils imports, the parts help never uses are left until used
+(`DEFERRED`)."""
 
 from __future__ import annotations
 
 import re
 from typing import Any
+
+#: What typer's rich_utils imports at its top and our help never uses: rich's markdown (the help
+#: is in rich markup) and its traceback (pretty exceptions are off). They are about a third of
+#: `--help`'s imports (0.11 of 0.32 s, `python -X importtime`), so while rich_utils is imported
+#: they are stand-ins that import the real class at its first use.
+DEFERRED = (("rich.markdown", "Markdown"), ("rich.traceback", "Traceback"))
+
+
+class _Deferred(type):
+    """The class of a stand-in: calling it or reading an attribute imports the real class."""
+
+    def real(cls) -> Any:
+        import importlib
+
+        return getattr(importlib.import_module(cls.__module__), cls.__name__)
+
+    def __call__(cls, *args: Any, **kw: Any) -> Any:
+        return cls.real()(*args, **kw)
+
+    def __getattr__(cls, attr: str) -> Any:
+        return getattr(cls.real(), attr)
+
+
+def _import_rich_utils() -> Any:
+    """typer.rich_utils, imported with DEFERRED's modules as stand-ins (those not yet imported):
+    each holds a `_Deferred` class of the real one's name, and leaves sys.modules when the import
+    is done, so a later import gets the real module."""
+    import sys
+    import types
+
+    stubs = {}
+    for module, name in DEFERRED:
+        if module not in sys.modules:
+            stubs[module] = types.ModuleType(module)
+            setattr(stubs[module], name, _Deferred(name, (), {"__module__": module}))
+    sys.modules.update(stubs)
+    try:
+        from typer import rich_utils
+    finally:
+        for module, stub in stubs.items():
+            if sys.modules.get(module) is stub:
+                del sys.modules[module]
+    return rich_utils
 
 
 def install() -> None:
@@ -18,7 +62,8 @@ def install() -> None:
         from rich.columns import Columns
         from rich.table import Table
         from rich.text import Text
-        from typer import rich_utils
+
+        rich_utils = _import_rich_utils()
     except ImportError:  # typer without rich: click's own help, which wraps and never cuts
         return
     if getattr(rich_utils, "_vtsbench_help", False):
