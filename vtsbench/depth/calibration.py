@@ -440,8 +440,8 @@ class CalibrationRun:
         return self.held_out or self.train_examples
 
 
-#: Colour subsampling that costs a marker gel's depth (4:2:2, half the colour across only,
-#: measured as 4:4:4 does: 1.11-1.15x on the simulated gels at JPEG 75; docs/depth.md).
+#: Colour subsampling that costs a marker gel's depth no more than full colour does (4:2:2, half
+#: the colour across only: 1.11-1.15x on the simulated gels at JPEG 75, as 4:4:4; docs/depth.md).
 HARMLESS_SUBSAMPLING = frozenset({"4:2:2"})
 
 
