@@ -679,7 +679,8 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
 
 def training_samples(presses: list[Press], background: np.ndarray, scale: tuple[float, float],
                      rim: Rim, blur_px: float, rng: np.random.Generator,
-                     markers: MarkerSpec | None = None
+                     markers: MarkerSpec | None = None,
+                     dots: tuple[np.ndarray, np.ndarray] | None = None
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(colour (N, 3), xy (N, 2), target (N, 2), is_cap (N,)) from the presses' labelled pixels;
     with markers, the pixels the run time divides or fills (`markers.corrected`: the
@@ -688,12 +689,15 @@ def training_samples(presses: list[Press], background: np.ndarray, scale: tuple[
     which would bias the fit towards flat, so it learns from the gel between them. A press's
     own dark blobs are not left out as such: one can be a dot merged with a dark lobe of the
     imprint, and without the lobe's colours the fit extrapolates (simulated `zones3`: a held-out
-    press 21.4 um off against 8.9 um)."""
+    press 21.4 um off against 8.9 um). dots: the background's (transmission, grown dots)
+    (`markers.background_dots`), found when not given."""
     from .mapping import norm_xy
 
     h, w = background.shape[:2]
     xn, yn = norm_xy(h, w)
-    trans, base = (None, None) if markers is None else background_dots(background, markers)
+    if markers is not None and dots is None:
+        dots = background_dots(background, markers)
+    trans, base = (None, None) if markers is None else dots
     cols, xys, tgts, caps = [], [], [], []
     for p in presses:
         f = sphere_fields((h, w), p.x, p.y, p.r, p.ball_radius_mm, scale, rim)
@@ -730,8 +734,9 @@ def fit_calibration(train: list[Press], background: np.ndarray, setup: dict[str,
         raise VtsError(f"--markers must be auto or off, got {markers!r}")
     spec = detect_markers(background, scale, grow_px=max(1, math.ceil(2 * blur_px))) \
         if markers == "auto" else None
+    dots = None if spec is None else background_dots(background, spec)
     colour, xy, target, is_cap = training_samples(train, background, scale, rim, blur_px, rng,
-                                                  spec)
+                                                  spec, dots)
     limit = float(min(255.0, np.percentile(np.abs(colour), 99.9) * 1.05 + 1.0))
     np.clip(colour, -limit, limit, out=colour)
     mapping = fit_mapping(method, colour, xy, target, **dict(options or {}))
@@ -741,6 +746,8 @@ def fit_calibration(train: list[Press], background: np.ndarray, setup: dict[str,
                       sensor=setup["sensor"], mm_per_px=scale,
                       ball_radius_mm=setup["ball_radius_mm"], rim=rim, blur_px=blur_px,
                       colour_limit_dn=limit, n_presses=len(train), markers=spec)
+    if dots is not None:  # the run time's cache (`Calibration.dots`): found once
+        cal.__dict__["_dots"] = dots
     return cal, (colour, xy, target, is_cap)
 
 
