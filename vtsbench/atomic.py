@@ -25,6 +25,37 @@ def temporary_name(path: Path) -> Path:
     return path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}{TMP_SUFFIX}")
 
 
+def _process_umask() -> int:
+    """This process's umask, read without changing it where Linux shows it (/proc), else by
+    setting and restoring it (at import, before any writer thread)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+#: Permissions of an ordinary new file here: what `open` gives (0o666 less the umask).
+ORDINARY_MODE = 0o666 & ~_process_umask()
+
+
+def _ordinary_permissions(tmp: Path) -> None:
+    """Widen a finished temporary file to ORDINARY_MODE where its library made it private:
+    safetensors (0.4+) writes 0o600, which leaves a lab's shared checkpoints unreadable to the
+    rest of its group. A mode that is not narrower (an executable, a wider one) is kept."""
+    try:
+        mode = tmp.stat().st_mode & 0o777
+    except FileNotFoundError:
+        return  # the block wrote nothing: the rename below says so
+    if mode != ORDINARY_MODE and mode & ~ORDINARY_MODE == 0:
+        os.chmod(tmp, ORDINARY_MODE)
+
+
 def write_bytes_atomic(path: str | os.PathLike, data: bytes | Sequence[bytes]) -> None:
     """Write a file (bytes, or parts written one after the other) through a unique temporary
     name in its folder and a rename.
@@ -47,6 +78,7 @@ def replacing(path: str | os.PathLike) -> Iterator[Path]:
     tmp = temporary_name(path)
     try:
         yield tmp
+        _ordinary_permissions(tmp)
         os.replace(tmp, path)
     except OSError as e:
         tmp.unlink(missing_ok=True)
