@@ -84,6 +84,7 @@ class Faults:
 
     def run(self, fn: Callable[[], Any]) -> bool:
         """Run fn; True when it was killed. The disk works again afterwards."""
+        gc.freeze()  # the collection below looks only at what fn made: 0.12 -> 0.01 s a run
         try:
             fn()
             return False
@@ -92,6 +93,7 @@ class Faults:
         finally:
             self.dead = self.armed = False
             gc.collect()  # files the dead process held (its lock) are closed, as by the kernel
+            gc.unfreeze()
 
 
 def _arm_at(mp: pytest.MonkeyPatch, faults: Faults, owner: Any, name: str) -> None:
