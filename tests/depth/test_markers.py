@@ -21,10 +21,12 @@ from vtsbench.depth.calibration import (
 )
 from vtsbench.depth.markers import (
     DOT_MIN_TRANSMISSION,
+    FIT_MIN_TRANSMISSION,
     corrected,
     detect_markers,
     dot_correction,
     fill_gradients,
+    left_out_of_fit,
     marker_mask,
     transmission,
 )
@@ -286,6 +288,38 @@ def test_the_fit_leaves_out_what_the_run_time_corrects_not_a_dark_lobe_beside_a_
     went = (slid < 0.9) & ~base
     assert went.any()
     assert corrected(dot_correction(moved, spec, bg, trans))[went].all()
+
+
+@pytest.mark.parametrize("darkness", [0.7, 0.9])
+def test_the_fit_learns_from_the_dots_lighter_parts_and_their_ring(darkness: float) -> None:
+    """`left_out_of_fit`: of what the run time corrects, the fit leaves out a still dot's core
+    darker than FIT_MIN_TRANSMISSION, what is filled (a core below DOT_MIN_TRANSMISSION) and
+    where a moved dot went; a dot's lighter edge and the ring the dots are grown by stay in."""
+    rng = np.random.default_rng(6)
+    h, w, mm = 120, 160, 0.06
+    gel = np.full((h, w, 3), (150, 120, 100), np.float64) + rng.normal(0, 1.0, (h, w, 3))
+    layer = dot_layer(h, w, mm, darkness=darkness)
+    bg = np.clip(gel * layer[..., None], 0, 255).astype(np.uint8)
+    spec = detect_markers(bg, mm, grow_px=2)
+    assert spec is not None
+    trans = transmission(bg, spec)
+    t = trans.mean(axis=-1)
+    press = np.clip(gel * 1.1 * layer[..., None], 0, 255).astype(np.uint8)  # nothing moved
+    corr = dot_correction(press, spec, bg, trans)
+    out = left_out_of_fit(corr, trans)
+    core, edge, ring = (corr.dots & (t < FIT_MIN_TRANSMISSION),
+                        corr.dots & (t >= FIT_MIN_TRANSMISSION) & (t < 0.95),
+                        corr.dots & (t == 1.0))
+    assert core.sum() > 100 and edge.sum() > 50 and ring.sum() > 100
+    assert out[core].all() and not out[(edge | ring) & ~corr.fill].any()
+    assert not out[~corr.dots].any()
+    # the darker dots' cores are filled, and the fill grown by spec.grow_px
+    assert corr.fill.any() == (darkness > 1 - DOT_MIN_TRANSMISSION)
+    assert out[corr.fill].all() and (edge | ring)[corr.fill].any() == corr.fill.any()
+    slid = np.roll(layer, 3, axis=1)  # dots slid by 3 px, followed: where they went stays out
+    moved = np.clip(gel * slid[..., None], 0, 255).astype(np.uint8)
+    went = (slid < 0.9) & ~corr.dots
+    assert went.any() and left_out_of_fit(dot_correction(moved, spec, bg, trans), trans)[went].all()
 
 
 def test_harmonic_fill_is_exact_on_a_linear_field() -> None:

@@ -32,10 +32,10 @@ from .markers import (
     DotCorrection,
     MarkerSpec,
     background_dots,
-    corrected,
     detect_markers,
     dot_correction,
     fill_gradients,
+    left_out_of_fit,
 )
 from .sphere import Rim, ball_radius_px, circle_doubts, detect_circle, sphere_fields
 
@@ -683,13 +683,15 @@ def training_samples(presses: list[Press], background: np.ndarray, scale: tuple[
                      dots: tuple[np.ndarray, np.ndarray] | None = None
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(colour (N, 3), xy (N, 2), target (N, 2), is_cap (N,)) from the presses' labelled pixels;
-    with markers, the pixels the run time divides or fills (`markers.corrected`: the
-    background's dots, where moved dots went, what is filled) are left out: divided back
-    (`Calibration.dots`), a dot's pixels carry up to 1 / DOT_MIN_TRANSMISSION times the noise,
-    which would bias the fit towards flat, so it learns from the gel between them. A press's
-    own dark blobs are not left out as such: one can be a dot merged with a dark lobe of the
-    imprint, and without the lobe's colours the fit extrapolates (simulated `zones3`: a held-out
-    press 21.4 um off against 8.9 um). dots: the background's (transmission, grown dots)
+    with markers, the colour difference is the run time's (the dots divided back, then
+    blurred), and of the pixels the run time divides or fills the fit leaves out the dots'
+    dark cores, where moved dots went and what is filled (`markers.left_out_of_fit`): divided
+    back (`Calibration.dots`), a dot's pixels carry up to 1 / DOT_MIN_TRANSMISSION times the
+    noise, which would bias the fit towards flat; it learns from the gel between the dots,
+    their grown ring and their lighter parts (FIT_MIN_TRANSMISSION). A press's own dark blobs
+    are not left out as such: one can be a dot merged with a dark lobe of the imprint, and
+    without the lobe's colours the fit extrapolates (simulated `zones3`: a held-out press 21.4
+    um off against 8.9 um). dots: the background's (transmission, grown dots)
     (`markers.background_dots`), found when not given."""
     from .mapping import norm_xy
 
@@ -701,9 +703,10 @@ def training_samples(presses: list[Press], background: np.ndarray, scale: tuple[
     cols, xys, tgts, caps = [], [], [], []
     for p in presses:
         f = sphere_fields((h, w), p.x, p.y, p.r, p.ball_radius_mm, scale, rim)
-        diff = colour_difference(p.image, background, blur_px)
-        dots = None if markers is None else corrected(
-            dot_correction(p.image, markers, background, trans, base))
+        corr = None if markers is None else dot_correction(p.image, markers, background, trans,
+                                                           base)
+        diff = colour_difference(p.image, background, blur_px, dots=corr)
+        dots = None if corr is None else left_out_of_fit(corr, trans)
         for sel, n_max, is_cap in ((f.trusted, CAP_SAMPLES, True), (f.flat, FLAT_SAMPLES, False)):
             if dots is not None:
                 sel = sel & ~dots
