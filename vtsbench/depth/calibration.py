@@ -706,10 +706,10 @@ def training_samples(presses: list[Press], background: np.ndarray, scale: tuple[
         corr = None if markers is None else dot_correction(p.image, markers, background, trans,
                                                            base)
         diff = colour_difference(p.image, background, blur_px, dots=corr)
-        dots = None if corr is None else left_out_of_fit(corr, trans)
+        left_out = None if corr is None else left_out_of_fit(corr, trans)
         for sel, n_max, is_cap in ((f.trusted, CAP_SAMPLES, True), (f.flat, FLAT_SAMPLES, False)):
-            if dots is not None:
-                sel = sel & ~dots
+            if left_out is not None:
+                sel = sel & ~left_out
             ys, xs = np.nonzero(sel)
             if ys.size > n_max:
                 k = np.sort(rng.choice(ys.size, n_max, replace=False))
