@@ -1,6 +1,7 @@
 """Depth speed on a marker gel: frames/s of the whole image-to-depth path on 480x640 frames of
 the simulated marker gel against the same gel with its dots printed with no ink, and against
-the marker gel with the harmonic fill's factorisation redone for every frame (the former code:
+the marker gel without the dots' own blur (`MarkerSpec.dot_blur_px` 0), and against the marker
+gel with the harmonic fill's factorisation redone for every frame (the former code:
 `markers._SYSTEMS_MAX` 0), in one alternated run (round after round, each mode once a round;
 the median round).
 
@@ -14,10 +15,12 @@ dots' share of the time shows) on every press, then reconstructed with the DCT s
 from __future__ import annotations
 
 import argparse
+import copy
 import sys
 import tempfile
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -60,9 +63,17 @@ def main() -> None:
         finally:
             markers._SYSTEMS_MAX = keep
 
+    # the same calibration without the dots' own blur (markers.DOT_BLUR_MM; its DepthMaker
+    # is made anew, the background's dots are shared)
+    unblurred = copy.copy(cals["markers"])
+    unblurred.__dict__.pop("_maker", None)
+    unblurred.markers = replace(spec, dot_blur_px=0.0)
+
     modes: dict[str, Callable[[], object]] = {
         "plain gel (dots with no ink)": lambda: reconstruct(frames["none"], cals["none"]),
         "marker gel": lambda: reconstruct(frames["markers"], cals["markers"]),
+        f"marker gel without the dots' own blur ({spec.dot_blur_px:g} px)":
+            lambda: reconstruct(frames["markers"], unblurred),
         "marker gel, factorised every frame (before)": lambda: refactorised(frames["markers"]),
     }
     for fn in modes.values():  # warm-up: lazy imports, the factorisation kept

@@ -20,7 +20,7 @@ import os
 import struct
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +32,9 @@ from .markers import (
     DotCorrection,
     MarkerSpec,
     background_dots,
+    blur_difference,
     detect_markers,
+    dot_blur_px,
     dot_correction,
     fill_gradients,
     left_out_of_fit,
@@ -143,15 +145,19 @@ class Calibration:
                                torch.from_numpy(self.zero_map).to(dev))
         bg, zero = cache[str(dev)]
         diff = images.to(torch.float32) - bg
-        fill = None
+        fill = weight = None
         if self.markers is not None:  # the dots are found on the CPU
             dots = self.dots(images.cpu().numpy())
             fill = dots.fill
             diff = diff * torch.from_numpy(np.array(dots.gain, np.float32)).to(dev)
             if dots.offset is not None:
                 diff = diff + torch.from_numpy(dots.offset).to(dev)
-        if self.blur_px > 0:
-            diff = _blur_torch(diff, self.blur_px)
+            if dots.blur_weight is not None:
+                weight = torch.from_numpy(dots.blur_weight).to(dev)
+        sharp = _blur_torch(diff, self.blur_px) if self.blur_px > 0 else diff
+        if weight is not None:  # as markers.blur_difference
+            sharp = (_blur_torch(diff, self.markers.dot_blur_px) - sharp) * weight + sharp
+        diff = sharp
         diff = diff.clamp(-self.colour_limit_dn, self.colour_limit_dn)
         g = self.mapping.predict_torch(diff) - zero
         g = torch.where((diff != 0).any(dim=-1, keepdim=True), g, torch.zeros_like(g))
@@ -203,17 +209,17 @@ class Calibration:
 def colour_difference(images: np.ndarray, background: np.ndarray, blur_px: float,
                       limit_dn: float = 255.0, dots: DotCorrection | None = None) -> np.ndarray:
     """images - background in float32 DN, with a marker gel's dots taken out when given
-    (`Calibration.dots`), Gaussian-blurred by blur_px, clipped to +-limit_dn."""
-    import cv2
-
+    (`Calibration.dots`), Gaussian-blurred by blur_px (on the dots by their own blur,
+    `DotCorrection.wide_px`), clipped to +-limit_dn."""
     diff = np.asarray(images, np.float32) - background.astype(np.float32)
-    if dots is not None:
+    weight, wide_px = None, 0.0
+    if dots is not None:  # divided out, then blurred wider over the dots
         dots.apply(diff)
-    if blur_px > 0:
+        weight, wide_px = dots.blur_weight, dots.wide_px
+    if blur_px > 0 or weight is not None:
         frames = diff.reshape(-1, *diff.shape[-3:])
         for k in range(frames.shape[0]):
-            frames[k] = cv2.GaussianBlur(frames[k], (0, 0), blur_px,
-                                         borderType=cv2.BORDER_REFLECT_101)
+            frames[k] = blur_difference(frames[k], blur_px, weight, wide_px)
     np.clip(diff, -limit_dn, limit_dn, out=diff)
     return diff
 
@@ -737,6 +743,8 @@ def fit_calibration(train: list[Press], background: np.ndarray, setup: dict[str,
         raise VtsError(f"--markers must be auto or off, got {markers!r}")
     spec = detect_markers(background, scale, grow_px=max(1, math.ceil(2 * blur_px))) \
         if markers == "auto" else None
+    if spec is not None:
+        spec = replace(spec, dot_blur_px=dot_blur_px(scale, blur_px))
     dots = None if spec is None else background_dots(background, spec)
     colour, xy, target, is_cap = training_samples(train, background, scale, rim, blur_px, rng,
                                                   spec, dots)
@@ -764,7 +772,6 @@ def choose_rim(train: list[Press], background: np.ndarray, setup: dict[str, Any]
     """The rim shrink (RIM_CANDIDATES, the rest of `rim` kept) with the lowest mean
     plane-aligned RMSE in `folds`-fold cross-validation over the training presses alone, and
     each candidate's score ("shrink_px/shrink_frac" -> mm)."""
-    from dataclasses import replace
 
     k = max(2, min(int(folds), len(train)))
     fold = np.arange(len(train)) % k
