@@ -55,13 +55,14 @@ def main() -> None:
     dots = float(markers.marker_mask(cals["markers"].background, spec).mean())
 
     def refactorised(f: np.ndarray) -> object:
-        keep = markers._SYSTEMS_MAX
+        keep, kept = markers._SYSTEMS_MAX, markers._SYSTEMS.copy()
         markers._SYSTEMS_MAX = 0  # every harmonic fill factorises its system again
         markers._SYSTEMS.clear()
         try:
             return reconstruct(f, cals["markers"])
-        finally:
-            markers._SYSTEMS_MAX = keep
+        finally:  # the other modes find the systems they kept (the mode after this one
+            markers._SYSTEMS_MAX = keep  # would otherwise factorise them again)
+            markers._SYSTEMS.update(kept)
 
     # the same calibration without the dots' own blur (markers.DOT_BLUR_MM; its DepthMaker
     # is made anew, the background's dots are shared)
