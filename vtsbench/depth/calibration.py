@@ -772,7 +772,6 @@ def choose_rim(train: list[Press], background: np.ndarray, setup: dict[str, Any]
     """The rim shrink (RIM_CANDIDATES, the rest of `rim` kept) with the lowest mean
     plane-aligned RMSE in `folds`-fold cross-validation over the training presses alone, and
     each candidate's score ("shrink_px/shrink_frac" -> mm)."""
-
     k = max(2, min(int(folds), len(train)))
     fold = np.arange(len(train)) % k
     scores: dict[str, float] = {}

@@ -229,13 +229,14 @@ FOLLOW_SHARE = 0.25
 
 
 #: On a marker gel the colour difference is blurred over the background's grown dots by
-#: DOT_BLUR_MM (at least the calibration's own blur; `MarkerSpec.dot_blur_px`) and by the
-#: calibration's blur elsewhere, blended across a soft edge of DOT_BLUR_EDGE_PX: what a dot
-#: leaves once divided out (its noise lifted by 1 / transmission, its edge, a JPEG's ringing
-#: of it) the mapping reads as slope. Simulated marker gels at 0.05 mm/px, 16 presses held out
-#: in turn, against the same presses with ink-less dots: three coloured lights 1.24 -> 1.17x
-#: landscape; at 0.06 mm/px, dots of 8 and 20 px through JPEG 70 -6 to -9 % (docs/depth.md).
-#: In mm: 3 px at 0.05 mm/px cost Taxim's 16 px contacts (0.1245 mm/px) 3 % more error.
+#: DOT_BLUR_MM (`MarkerSpec.dot_blur_px`; none where that is no wider than the calibration's
+#: own blur) and by the calibration's blur elsewhere, blended across a soft edge of
+#: DOT_BLUR_EDGE_PX: what a dot leaves once divided out (its noise lifted by 1 / transmission,
+#: its edge, a JPEG's ringing of it) the mapping reads as slope. Simulated marker gels at
+#: 0.05 mm/px, 16 presses held out in turn, against the same presses with ink-less dots: three
+#: coloured lights 1.24 -> 1.17x landscape; at 0.06 mm/px, dots of 8 and 20 px through JPEG 70
+#: -8 % error, losslessly -0.2 to -1.8 % (docs/depth.md, marker gels). A size in mm, not in
+#: px: 3 px on Taxim's dots (0.1245 mm/px, contacts of 16 px) cost 3 % more error.
 DOT_BLUR_MM = 0.15
 DOT_BLUR_EDGE_PX = 1.0
 
@@ -248,7 +249,7 @@ def dot_blur_px(mm_per_px: float | tuple[float, float], blur_px: float) -> float
 
 
 def dot_blur_weight(dots: np.ndarray) -> np.ndarray:
-    """(H, W, 1) float32: the share of DOT_BLUR_PX's blur at each pixel, 1 on the grown dots
+    """(H, W, 1) float32: the share of the dots' own blur at each pixel, 1 on the grown dots
     (H, W bool), falling to 0 across DOT_BLUR_EDGE_PX around them."""
     import cv2
 
