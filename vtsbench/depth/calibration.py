@@ -899,8 +899,11 @@ def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = 
                                                         blur_px=blur_px, rng=rng, options=opts,
                                                         markers=markers)
     if cal.markers is not None:
+        own = cal.markers.dot_blur_px
         say(f"marker gel: {cal.markers.n_dots} dots of {cal.markers.diameter_px:.1f} px in the "
-            "background, left out of the fit and filled before integration")
+            "background, divided out of the colour difference"
+            + (f" and blurred by {own:.2g} px there" if own > 0 else "")
+            + "; their dark cores left out of the fit, the darkest filled before integration")
         note = subsampled_colour_note(setup["sources"])
         if note:
             warnings.append(note)
