@@ -5,6 +5,7 @@ on, against the exact truth of the same presses without it."""
 from __future__ import annotations
 
 import importlib.util
+import json
 import shutil
 from pathlib import Path
 
@@ -32,6 +33,7 @@ from vtsbench.depth.markers import (
     transmission,
 )
 from vtsbench.depth.reconstruct import reconstruct
+from vtsbench.errors import VtsError
 from vtsbench.recordings.manifest import load_manifest
 from vtsbench.recordings.media import read_image, write_png
 
@@ -201,6 +203,16 @@ def test_marker_gel_flat_frame_gives_flat_depth_and_the_file_keeps_the_dots(fold
     bad = cal.metadata()
     bad["features"]["markers"]["dot_blur_px"] = -1.0
     assert metadata_errors(bad)
+    from safetensors.numpy import save
+
+    for blur, why in ((float("nan"), "NaN"), (1e9, r"features\.markers out of range")):
+        meta = cal.metadata()  # a hostile file: one line, and no Gaussian of 1e9 px
+        meta["features"]["markers"]["dot_blur_px"] = blur
+        (tmp_path / "bad.st").write_bytes(save(cal.tensors(),
+                                               metadata={"vtsbench": json.dumps(meta)}))
+        with pytest.raises(VtsError, match=why) as err:
+            load_calibration(tmp_path / "bad.st")
+        assert "\n" not in str(err.value)
     assert not np.any(reconstruct(cal.background, cal))  # the background: exactly flat
     if importlib.util.find_spec("torch") is not None:  # the torch path fills the dots too
         img = run.held_out[0].press.image

@@ -367,6 +367,10 @@ def load_calibration(path: str | Path, *, sensor: str | None = None,
         vtsbench_version=meta["vtsbench_version"], format_version=ver)
 
 
+#: The largest dots' own blur (px) a calibration file may ask for.
+MAX_DOT_BLUR_PX = 64.0
+
+
 def _marker_spec(d: Any, path: Path) -> MarkerSpec | None:
     """The stored marker settings, or None; a one-line error when they are damaged."""
     if d is None:
@@ -375,8 +379,10 @@ def _marker_spec(d: Any, path: Path) -> MarkerSpec | None:
         spec = MarkerSpec.from_dict(d)
     except (KeyError, TypeError, ValueError) as e:
         raise VtsError(f"corrupt calibration metadata: features.markers ({e})", path) from None
+    # the dots' own blur: a Gaussian of that size per frame, so bounded (a dot is under 3 mm)
     if not (spec.diameter_px > 0 and spec.window_px >= 3 and spec.window_px % 2 == 1
-            and 0 < spec.contrast < 1 and spec.grow_px >= 0):
+            and 0 < spec.contrast < 1 and spec.grow_px >= 0
+            and 0 <= spec.dot_blur_px <= MAX_DOT_BLUR_PX):
         raise VtsError("corrupt calibration metadata: features.markers out of range", path)
     return spec
 
