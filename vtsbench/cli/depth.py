@@ -57,7 +57,8 @@ def calibrate(
         help="label: use labelled circles, detect the others; detect: detect every circle "
              "(labels only compared, in report.json).")] = "label",
     markers: Annotated[Literal["auto", "off"], choice(
-        help="auto: a marker grid found in the background is left out of the fit and filled "
+        help="auto: a marker grid found in the background is divided out of the colour "
+             "difference and blurred there, its dark cores left out of the fit and filled "
              "before integration; off: never.")] = "auto",
     rim_cv: Annotated[bool, typer.Option(
         "--rim-cv", help="Choose the rim shrink by cross-validation over the training presses "
