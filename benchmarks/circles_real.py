@@ -188,8 +188,25 @@ def held_out_rmse(folder: Path, opts: dict, ref: dict[str, tuple[float, float]],
                     e = evaluate_press(run.calibration, press).errors["plane_aligned_rmse_mm"]
                     errs.setdefault(f"trained on {NAMES[c]} circles, scored against {how}",
                                     []).append(e)
-    return {k: float(np.mean(v)) for k, v in errs.items()} | {
+    out = {k: float(np.mean(v)) for k, v in errs.items()} | {
         "held-out presses": float(len(errs[next(iter(errs))]))}
+    pair = [errs.get(f"trained on {NAMES[c]} circles, scored against labels")
+            for c in ("label", "detect")]
+    if pair[0] and pair[1]:
+        out["ratio 95% interval"] = ratio_interval(np.array(pair[1]), np.array(pair[0]))
+    return out
+
+
+def ratio_interval(detected: np.ndarray, labelled: np.ndarray, draws: int = 10000,
+                   seed: int = 0) -> tuple[float, float]:
+    """A paired bootstrap 95 % interval of mean(detected) / mean(labelled) over held-out
+    presses (the same press resampled in both): how far a ratio over a handful of presses can
+    be trusted."""
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, detected.size, size=(draws, detected.size))
+    ratios = detected[idx].mean(axis=1) / labelled[idx].mean(axis=1)
+    lo, hi = np.percentile(ratios, [2.5, 97.5])
+    return float(lo), float(hi)
 
 
 def speed(folder: Path, opts: dict, repeats: int = 3) -> str:
@@ -273,7 +290,9 @@ def main() -> None:
                 print(f"{name}: {speed(folder, opts)}")
             if args.rmse:
                 for k, v in held_out_rmse(folder, opts, ref).items():
-                    print(f"{name}: {k}: " + (f"{v:.4f} mm" if "scored" in k else f"{v:.0f}"))
+                    shown = ("{:.2f}-{:.2f}x".format(*v) if isinstance(v, tuple)
+                             else f"{v:.4f} mm" if "scored" in k else f"{v:.0f}")
+                    print(f"{name}: {k}: {shown}")
 
 
 if __name__ == "__main__":

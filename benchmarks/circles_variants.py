@@ -324,6 +324,7 @@ def measure(s: PressSet, rec: Path, opts: dict, seeds: tuple[int, ...] | None,
         row["rmse_label"] = r["trained on labelled circles, scored against labels"]
         row["rmse_detect"] = r["trained on detected circles, scored against labels"]
         row["held_out"] = int(r["held-out presses"])
+        row["ratio_ci"] = r.get("ratio 95% interval")
     return row
 
 
@@ -331,7 +332,9 @@ def print_row(name: str, how: str, r: dict, took: float) -> None:
     tb = "-" if r.get("to_base") is None else f"{r['to_base'][0]:.2f} / {r['to_base'][1]:.2f}"
     rm = "-" if "rmse_label" not in r else (
         f"{r['rmse_label']:.4f} | {r['rmse_detect']:.4f} | "
-        f"{r['rmse_detect'] / r['rmse_label']:.2f}x ({r['held_out']})")
+        f"{r['rmse_detect'] / r['rmse_label']:.2f}x ({r['held_out']}"
+        + ("" if r.get("ratio_ci") is None else ", 95 % {:.2f}-{:.2f}x".format(*r["ratio_ci"]))
+        + ")")
     print(f"| {name} | {how} | {r['used']} | {', '.join(r['dropped']) or 'none'} | "
           f"{r['centre_med']:.2f} ({r['centre_med_1x']:.2f}) | {r['within3']:.0%} "
           f"({r['within3_1x']:.0%}) | {r['radius_med']:+.1%} | {r['within10']:.0%} | "

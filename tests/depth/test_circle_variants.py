@@ -315,3 +315,23 @@ def test_a_circle_from_a_blurred_map_settles_on_the_usual_one(layout) -> None:
     assert abs(cr - r) < abs(wide[2] - r) / 2, (wide, cr)
     lost = _settle(change_map(bg, bg, 1.0, markers=True), (60.0, 60.0, 20.0), 1.0)
     assert lost[:2] == (60.0, 60.0)
+
+
+@pytest.mark.parametrize(("shape", "frac", "seed"), [((320, 240), 0.85, (0, 3, 4, 7)),
+                                                     ((240, 320), 0.95, (0, 3, 4, 2))])
+def test_rays_that_drop_at_once_do_not_outweigh_the_rim(monkeypatch, shape, frac, seed) -> None:
+    """Deep presses under four side lights through a marker gel: where two lights cancel, a
+    ray's change peaks low inside the contact and drops at once, and on the diagonals the lit
+    skirt's outer fall is sharp; weighted by their drop over their peak, a few such rays outweigh
+    the rim (6.5 and 6.6 px off). With each ray counted at most 1.5 times the median ray in
+    RANSAC (`sphere.RAY_WEIGHT_CAP`) the circle lies within 1 px."""
+    from vtsbench.depth import sphere
+
+    bg, img, (x, y, r), ball = _sim_press("sides4", shape, frac, 0.0652, seed)
+    found = detect_circle(img, bg, ball_px=ball)
+    assert found is not None
+    assert math.hypot(found[0] - x, found[1] - y) < 1.5 and abs(found[2] / r - 1) < 0.05, \
+        (found, (x, y, r))
+    monkeypatch.setattr(sphere, "RAY_WEIGHT_CAP", math.inf)
+    uncapped = detect_circle(img, bg, ball_px=ball)
+    assert uncapped is not None and math.hypot(uncapped[0] - x, uncapped[1] - y) > 3, uncapped
