@@ -158,8 +158,10 @@ def table(name: str, rs: list[dict], show_all: bool) -> None:
 
 
 def held_out_rmse(folder: Path, opts: dict, ref: dict[str, tuple[float, float]],
-                  seeds: tuple[int, ...] = (0, 1, 2)) -> dict[str, float]:
-    """Mean held-out plane-aligned RMSE (mm) per (circles trained with, circles scored with)."""
+                  seeds: tuple[int, ...] = (0, 1, 2)
+                  ) -> dict[str, float | tuple[float, float]]:
+    """Mean held-out plane-aligned RMSE (mm) per (circles trained with, circles scored with),
+    the number of held-out presses, and the 95 % interval of the detected / labelled ratio."""
     from dataclasses import replace
 
     import numpy as np
@@ -200,13 +202,13 @@ def held_out_rmse(folder: Path, opts: dict, ref: dict[str, tuple[float, float]],
 def ratio_interval(detected: np.ndarray, labelled: np.ndarray, draws: int = 10000,
                    seed: int = 0) -> tuple[float, float]:
     """A paired bootstrap 95 % interval of mean(detected) / mean(labelled) over held-out
-    presses (the same press resampled in both): how far a ratio over a handful of presses can
-    be trusted."""
-    rng = np.random.default_rng(seed)
-    idx = rng.integers(0, detected.size, size=(draws, detected.size))
-    ratios = detected[idx].mean(axis=1) / labelled[idx].mean(axis=1)
-    lo, hi = np.percentile(ratios, [2.5, 97.5])
-    return float(lo), float(hi)
+    presses (the same press resampled in both, with the evaluation's seeded resampling): how
+    far a ratio over a handful of presses can be trusted."""
+    from vtsbench.evaluation.metrics import bootstrap_indices, interval
+
+    idx = bootstrap_indices(detected.size, reps=draws, seed=seed)
+    lo, hi = interval(detected[idx].mean(axis=1) / labelled[idx].mean(axis=1))
+    return lo, hi
 
 
 def speed(folder: Path, opts: dict, repeats: int = 3) -> str:
