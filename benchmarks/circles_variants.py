@@ -15,14 +15,16 @@ vignette (VIGNETTE), another white balance (BALANCE) and an auto exposure that b
 presses but not the background (EXPOSURE; DIGIT's background is estimated from the presses, so
 there every frame is brighter alike); and a marker gel at a higher resolution, where the dots
 span more pixels: the grid moved, at 2x, and at 2.5x rotated then JPEG-compressed (a portrait
-frame of about 400x300 with contacts of about 42 px). Any variants joined by "-" are applied in
-turn (`--variants x1.25-mirror-noise`). Per set and variant, one row: presses used and dropped
-(`calibrate --circles detect`), the detected circles against the labels (centre distance, median
-and share within 3 px of the variant's pixels, and in the set's own pixels; radius error after
-the 0.97 R clamp both get, median and share within 10 %; the share within both), and the
-held-out plane-aligned RMSE of poly calibrations trained on the labelled and on the detected
-circles (hold-out of a fifth, seeds pooled, the same held-out presses, scored against the
-labels).
+frame of about 400x300 with contacts of about 42 px); the frame cut by an eighth of each side
+(contacts near the edge cut by the border), and coloured side lights that fall off across the
+gel (each channel's light a ramp of 1 -/+ RAMP along its own direction, so that bright lobes
+clip at 255). Any variants joined by "-" are applied in turn (`--variants x1.25-mirror-noise`).
+Per set and variant, one row: presses used and dropped (`calibrate --circles detect`), the detected
+circles against the labels (centre distance, median and share within 3 px of the variant's pixels,
+and in the set's own pixels; radius error after the 0.97 R clamp both get, median and share within
+10 %; the share within both), and the held-out plane-aligned RMSE of poly calibrations trained on
+the labelled and on the detected circles (hold-out of a fifth, seeds pooled, the same held-out
+presses, scored against the labels).
 
 Where a detected centre is more than 3 px from its label, a referee that needs neither decides
 which one the imprint sides with: the centre about which the change is most point-symmetric
@@ -52,12 +54,16 @@ from circles_real import REAL, held_out_rmse
 
 VARIANTS = ("base", "rot90", "mirror", "x0.5", "x1.5", "x2", "jpeg75", "markers", "swap", "dim",
             "rot90-markers-jpeg75", "moved", "rot90-moved-jpeg75", "noise", "blur", "vignette",
-            "balance", "exposure", "x2-moved", "x2.5-rot90-moved-jpeg75")
+            "balance", "exposure", "x2-moved", "x2.5-rot90-moved-jpeg75", "crop", "ramp",
+            "crop-ramp", "crop-rot90-ramp-jpeg75")
 #: Other cameras: noise (DN, per pixel and channel), defocus (Gaussian sigma, px), corners
 #: darkened to this share of the centre's light; a white balance (R, G, B gains) and an auto
 #: exposure that makes the presses brighter than the background by this factor.
 NOISE_DN, BLUR_PX, VIGNETTE = 4.0, 1.5, 0.6
 BALANCE, EXPOSURE = (1.15, 1.0, 0.85), 1.08
+#: Coloured side lights: each channel's light a ramp from 1 - RAMP to 1 + RAMP across the frame,
+#: each along its own direction (0, 120 and 240 degrees).
+RAMP = 0.4
 MARKER_MM_PER_PX = 0.0634  # GelSight Mini at 320x240 (gelsight_mini_objects/gsmini.yaml)
 TAXIM_MM_PER_PX, TAXIM_BALL_MM = 0.1245, 2.0
 DIGIT_MM_PER_PX, DIGIT_BALL_MM = 1 / 21.09, 3.0
@@ -198,6 +204,22 @@ def variant(s: PressSet, how: str, layer: np.ndarray | None) -> PressSet | None:
         out = s.map(lambda a: _u8(a * EXPOSURE), _same)
         return PressSet(out.name, out.images, s.bg, out.labels, out.mm_per_px, out.ball_mm,
                         out.factor, out.fwd)
+    if how == "crop":  # an eighth of each side cut off: contacts near the edge cut by the border
+        def crop(a: np.ndarray) -> np.ndarray:
+            h, w = a.shape[:2]
+            return np.ascontiguousarray(a[h // 8:h - h // 8, w // 8:w - w // 8])
+
+        return s.map(crop, lambda c, hw: (c[0] - hw[1] // 8, c[1] - hw[0] // 8, c[2]))
+    if how == "ramp":  # coloured side lights falling off across the gel, every frame alike
+        def ramp(a: np.ndarray) -> np.ndarray:
+            h, w = a.shape[:2]
+            yy, xx = np.mgrid[:h, :w]
+            u, v = 2 * xx / (w - 1) - 1, 2 * yy / (h - 1) - 1
+            gain = np.stack([1 + RAMP * (np.cos(t) * u + np.sin(t) * v) / math.sqrt(2)
+                             for t in np.deg2rad((0.0, 120.0, 240.0))], axis=-1)
+            return _u8(a * gain)
+
+        return s.map(ramp, _same)
     if how == "markers":
         if layer is None:
             return None

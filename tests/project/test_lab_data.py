@@ -57,6 +57,25 @@ def test_a_good_circle_has_no_doubts_and_bad_ones_say_why() -> None:
     assert "not a circle" in circle_doubts((np.nan, 50, 14), img, bg, 30)[0]
 
 
+def test_a_circle_beside_a_stronger_change_is_doubted() -> None:
+    # the imprint (a ring of 60 DN) and, away from it, a weaker patch of change (25 DN) as
+    # large, where a clipped lobe or a brightened skirt can draw a circle
+    bg, img = _press(x=40, y=45, r=14)
+    yy, xx = np.mgrid[:96, :128]
+    patch = np.hypot(xx - 98, yy - 50) <= 14
+    img = img.astype(np.int16)
+    img[patch, 1] += 25
+    img = np.clip(img, 0, 255).astype(np.uint8)
+    assert not any("stronger colour change" in d for d in circle_doubts((40, 45, 14), img, bg, 30))
+    doubts = circle_doubts((98, 50, 14), img, bg, 30)
+    assert doubts == ["a stronger colour change lies outside the circle (the imprint is elsewhere)"]
+    # the patch alone is no reason; once stronger than the ring, the ring's circle is doubted
+    assert circle_doubts((98, 50, 14), np.where(patch[..., None], img, bg), bg, 30) == []
+    img[patch, 1] = bg[patch, 1] + 120
+    assert not any("stronger colour change" in d for d in circle_doubts((98, 50, 14), img, bg, 30))
+    assert any("stronger colour change" in d for d in circle_doubts((40, 45, 14), img, bg, 30))
+
+
 def test_report_lists_every_press_and_doubted_labels(sim, tmp_path) -> None:
     from vtsbench.recordings.manifest import Circle
 
