@@ -91,7 +91,6 @@ class PressSet:
                         self.mm_per_px / scale, self.ball_mm, self.factor * scale,
                         lambda c: f_lab(self.fwd(c), shape))
 
-
     def without(self, ids: list[str]) -> PressSet:
         """The same set less the presses `ids`."""
         return PressSet(self.name, {k: v for k, v in self.images.items() if k not in ids},

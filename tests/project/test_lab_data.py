@@ -98,8 +98,13 @@ def test_report_lists_every_press_and_doubted_labels(sim, tmp_path) -> None:
 def test_contact_sheet_shows_every_press_its_circles_and_why(sim, tmp_path) -> None:
     """circles.png: one tile per press, used or dropped; a dropped press's tile says why, a
     press with both circles says how far they part."""
-    from vtsbench.depth.report import _tile_text, contact_sheet
+    from vtsbench.depth.report import _tile_box, _tile_text, contact_sheet
     from vtsbench.recordings.media import read_image
+
+    # every tile the same square around its circle, also where the border cuts the contact
+    for rec in ({"circle": {"x": 3.0, "y": 95.0, "r": 10.0}}, {"circle": None}):
+        y0, y1, x0, x1 = _tile_box(rec, (100, 160))
+        assert y1 - y0 == x1 - x0 and (y1 - y0) >= (37 if rec["circle"] else 160)
 
     # one press shows no contact (its frame is a background): dropped, and its tile says so
     gone = []

@@ -137,15 +137,18 @@ SHEET_COLS = 8
 
 
 def _tile_box(rec: dict[str, Any], shape: tuple[int, int]) -> tuple[int, int, int, int]:
-    """(y0, y1, x0, x1) around the press's circles (1.8 radii), or the whole frame."""
+    """(y0, y1, x0, x1): a square around the press's circles (1.8 radii), or around the whole
+    frame, which may reach beyond the frame (a contact cut by the border): every tile of the
+    sheet is then square, so their captions line up whatever the frame cuts off."""
     cs = [c for c in (rec.get("circle"), rec.get("label"), rec.get("detected")) if c]
     if not cs:
-        return 0, shape[0], 0, shape[1]
-    c = cs[0]
-    half = math.ceil(max(1.8 * max(k["r"] for k in cs), 10))
-    x, y = round(c["x"]), round(c["y"])
-    return (max(0, y - half), min(shape[0], y + half + 1), max(0, x - half),
-            min(shape[1], x + half + 1))
+        half = max(shape) // 2
+        y, x = shape[0] // 2, shape[1] // 2
+    else:
+        c = cs[0]
+        half = math.ceil(max(1.8 * max(k["r"] for k in cs), 10))
+        x, y = round(c["x"]), round(c["y"])
+    return y - half, y + half + 1, x - half, x + half + 1
 
 
 def _tile_text(rec: dict[str, Any], held: set[str]) -> str:
@@ -203,7 +206,12 @@ def contact_sheet(run: CalibrationRun, path: str | Path) -> Path:
             side.set_linewidth(2 if rec["status"] != "used" else 0.8)
         if img is not None:
             y0, y1, x0, x1 = _tile_box(rec, img.shape[:2])
-            ax.imshow(img[y0:y1, x0:x1], extent=(x0 - 0.5, x1 - 0.5, y1 - 0.5, y0 - 0.5))
+            h, w = img.shape[:2]
+            cy0, cy1, cx0, cx1 = max(0, y0), min(h, y1), max(0, x0), min(w, x1)
+            ax.set_facecolor("0.85")  # beyond the frame
+            if cy1 > cy0 and cx1 > cx0:
+                ax.imshow(img[cy0:cy1, cx0:cx1],
+                          extent=(cx0 - 0.5, cx1 - 0.5, cy1 - 0.5, cy0 - 0.5))
             used = rec.get("circle")
             for key, col, style in (("label", LABEL_COLOUR, "--"), ("detected", DETECTED_COLOUR,
                                                                     "-")):
