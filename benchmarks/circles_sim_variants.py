@@ -20,7 +20,7 @@ contacts of 0.5, 0.7, 0.85 and 0.95 of its radius (`DEEP_FRACS`), every layout, 
 
     nice -n 15 .venv/bin/python benchmarks/circles_sim_variants.py [--presses 16] [--folds 4]
         [--lights zones3,sides4,uniform] [--method poly] [--seed 0] [--jpeg gel|none|Q|lo-hi]
-        [--colour 420|422|444] [--deep]
+        [--colour 420|422|444] [--ramp 0.4] [--deep | --deep-calibrate]
 """
 
 from __future__ import annotations
@@ -47,12 +47,15 @@ GELS = ("none", "markers")
 
 def render_presses(lights: str, gel: str, shape: tuple[int, int], n: int, seed: int,
                    mm_per_px: float = MM_PER_PX, depths: list[float] | None = None,
-                   jpeg: tuple[int, int] | str | None = "gel"
+                   jpeg: tuple[int, int] | str | None = "gel", ramp: float = 0.0
                    ) -> tuple[np.ndarray, list[tuple[str, np.ndarray, tuple, object]]]:
     """The background and n presses (id, frame, exact circle, truth) of one layout, gel and
     frame shape; the same scenes and noise draws for every layout and gel. depths: press i
     that deep (mm) instead of a drawn depth. jpeg: the camera's JPEG quality range, None for
-    none, "gel" the marker gel's own (60-90)."""
+    none, "gel" the marker gel's own (60-90). ramp: every frame under coloured side lights
+    falling off across the gel (`circles_variants.ramp_light`), 0 for none."""
+    from circles_variants import ramp_light
+
     from vtsbench.sim.appearance import background, sensor_appearance
     from vtsbench.sim.optics import Capture, sensor
     from vtsbench.sim.plan import press_scene
@@ -68,6 +71,8 @@ def render_presses(lights: str, gel: str, shape: tuple[int, int], n: int, seed: 
     fields = sensor(*shape, mm_per_px, lights=lights)
     cap = Capture(gel=seed)
     bg = background(app, fields, cap, np.random.default_rng([seed, 1]))
+    if ramp:
+        bg = ramp_light(bg, ramp)
     out = []
     for i in range(n):
         rng = np.random.default_rng([seed, 2, i])
@@ -75,12 +80,15 @@ def render_presses(lights: str, gel: str, shape: tuple[int, int], n: int, seed: 
                             depth_mm=None if depths is None else depths[i])
         truth = render(scene.with_effects(dataclasses.replace(scene.effects, noise=False)))
         frame = relight(truth.grad, fields, cap, rng, app)[0]
+        if ramp:
+            frame = ramp_light(frame, ramp)
         (cx, cy), r = scene.centers_px[0], math.sqrt(truth.contact[0].sum() / math.pi)
         out.append((f"press-{i:03d}", frame, (cx, cy, r), truth))
     return bg, out
 
 
-def write_folder(out: Path, bg: np.ndarray, presses: list, sensor: str) -> Path:
+def write_folder(out: Path, bg: np.ndarray, presses: list, sensor: str,
+                 mm_per_px: float = MM_PER_PX) -> Path:
     """A recordings folder of presses with their exact circles and truth files."""
     from vtsbench.recordings.manifest import Circle, Entry, Manifest, Session, Source, save_manifest
     from vtsbench.recordings.media import write_png
@@ -99,7 +107,7 @@ def write_folder(out: Path, bg: np.ndarray, presses: list, sensor: str) -> Path:
                              object="calibration_ball", ball_radius_mm=BALL_RADIUS_MM,
                              circle=Circle(*c), truth=f"truth/{pid}.npz"))
     h, w = bg.shape[:2]
-    save_manifest(out, Manifest(sessions=[Session("s0", sensor, (h, w), (MM_PER_PX, MM_PER_PX),
+    save_manifest(out, Manifest(sessions=[Session("s0", sensor, (h, w), (mm_per_px, mm_per_px),
                                                   background="background.png")],
                                 entries=entries, name=out.name,
                                 created_by="benchmarks/circles_sim_variants.py"))
@@ -130,13 +138,13 @@ def jpeg_arg(text: str) -> tuple[int, int] | str | None:
 
 
 def measure(tmp: Path, name: str, bg: np.ndarray, presses: list, held_n: int,
-            method: str, folds: int = 1) -> dict:
+            method: str, folds: int = 1, mm_per_px: float = MM_PER_PX) -> dict:
     """The row of one variant (see the module doc). folds > 1: every press held out once
     (`folds` contiguous blocks), the held-out RMSE the mean over all presses."""
     from vtsbench.depth.calibration import Press, calibrate, evaluate_press, load_presses
     from vtsbench.sim.objects import BALL_RADIUS_MM
 
-    every = write_folder(tmp / f"{name}-all", bg, presses, name)
+    every = write_folder(tmp / f"{name}-all", bg, presses, name, mm_per_px)
     out = circle_errors(load_presses(every, circles="detect")[2]["presses"])
     n = len(presses)
     blocks = [range(n - held_n, n)] if folds <= 1 else \
@@ -144,7 +152,8 @@ def measure(tmp: Path, name: str, bg: np.ndarray, presses: list, held_n: int,
     errs: dict[str, list[float]] = {"detect": [], "label": []}
     for f, block in enumerate(blocks):
         train = write_folder(tmp / f"{name}-train{f}", bg,
-                             [p for i, p in enumerate(presses) if i not in block], name)
+                             [p for i, p in enumerate(presses) if i not in block], name,
+                             mm_per_px)
         held = [Press(pid, frame, *c, BALL_RADIUS_MM, "label", every / "truth" / f"{pid}.npz")
                 for pid, frame, c, _ in (presses[i] for i in block)]
         for circles in errs:
@@ -200,6 +209,42 @@ def deep(lights: list[str], seed: int) -> None:
     print(f"\nMachine: {machine()}")
 
 
+def deep_calibrate(lights: list[str], seed: int, method: str, folds: int,
+                   ramp: float = 0.0) -> None:
+    """`calibrate --circles detect` end to end (the circles' checks included) on the --deep
+    presses, ordered so that every fold holds one press of each contact fraction: presses used
+    and dropped, the circles against the exact ones, and the held-out RMSE with detected and
+    with exact circles, per layout, gel and frame."""
+    from vtsbench.sim.objects import BALL_RADIUS_MM
+
+    big = BALL_RADIUS_MM
+    fracs = [f for _ in range(DEEP_PER) for f in DEEP_FRACS]
+    depths = [big - math.sqrt(big**2 - (f * big) ** 2) for f in fracs]
+    print(f"Deep presses, calibrated: {len(depths)} presses of a {big} mm ball at "
+          f"{DEEP_MM_PER_PX:.4f} mm/px, contacts of {', '.join(map(str, DEEP_FRACS))} ball "
+          f"radii, each held out once in {folds} folds, {method}, seed {seed}, light ramp "
+          f"{ramp}\n")
+    print("| lights | gel | frame | used | dropped | centre error px, median / max | radius "
+          "error, median / max | within 3 px and 10 % | held-out RMSE mm, exact circles | "
+          "detected | ratio |")
+    print("|---|---|---|---:|---:|---|---|---:|---:|---:|---:|")
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in lights:
+            for gel in GELS:
+                for frame, shape in SHAPES.items():
+                    bg, presses = render_presses(name, gel, shape, len(depths), seed,
+                                                 DEEP_MM_PER_PX, depths, ramp=ramp)
+                    r = measure(Path(tmp), f"{name}-{frame}-{gel}", bg, presses, 4, method,
+                                folds, DEEP_MM_PER_PX)
+                    print(f"| {name} | {gel} | {frame} | {r['used']} | {r['dropped']} | "
+                          f"{r['centre_med']:.2f} / {r['centre_max']:.2f} | "
+                          f"{r['radius_med']:.1%} / {r['radius_max']:.1%} | {r['good']:.0%} | "
+                          f"{r['label']:.4f} | {r['detect']:.4f} | "
+                          f"{r['detect'] / r['label']:.2f}x |", flush=True)
+    print(f"\nTotal {time.perf_counter() - t0:.0f} s. Machine: {machine()}")
+
+
 def colour_jpeg(sampling: str) -> None:
     """The simulated camera's JPEG with its colour at another resolution ("422" or "444"):
     the simulator's `camera.jpeg` given that sampling for this run."""
@@ -231,17 +276,27 @@ def main() -> None:
                          "default), 422 (half across, many USB cameras' MJPEG) or 444 (full)")
     ap.add_argument("--deep", action="store_true",
                     help="circles only, on presses of 0.5-0.95 ball radii (DEEP_FRACS)")
+    ap.add_argument("--ramp", type=float, default=0.0,
+                    help="coloured side lights falling off across the gel: each channel's light "
+                         "1 -/+ this along its own direction (circles_variants.ramp_light)")
+    ap.add_argument("--deep-calibrate", action="store_true",
+                    help="calibrate end to end on the --deep presses: used, dropped, circles "
+                         "and held-out RMSE")
     args = ap.parse_args()
     if args.colour != "420":
         colour_jpeg(args.colour)
     if args.deep:
         deep(args.lights.split(","), args.seed)
         return
+    if args.deep_calibrate:
+        deep_calibrate(args.lights.split(","), args.seed, args.method, args.folds, args.ramp)
+        return
     held_n = max(1, args.presses // 4)
     held = f"{held_n} held out" if args.folds <= 1 else \
         f"each held out once in {args.folds} folds"
     print(f"{args.presses} simulated presses of a 3 mm ball a variant at {MM_PER_PX} mm/px, "
-          f"{held}, {args.method}, seed {args.seed}, JPEG {args.jpeg} colour {args.colour}\n")
+          f"{held}, {args.method}, seed {args.seed}, JPEG {args.jpeg} colour {args.colour}, "
+          f"light ramp {args.ramp}\n")
     print("| lights | gel | frame | used | dropped | centre error px, median / max | radius "
           "error, median / max | within 3 px and 10 % | markers found | held-out RMSE mm, "
           "exact circles | detected | ratio | x without markers (exact / detected) | time |")
@@ -254,7 +309,7 @@ def main() -> None:
                 for gel in GELS:
                     t0 = time.perf_counter()
                     bg, presses = render_presses(lights, gel, shape, args.presses, args.seed,
-                                                 jpeg=args.jpeg)
+                                                 jpeg=args.jpeg, ramp=args.ramp)
                     r = measure(Path(tmp), f"{lights}-{frame}-{gel}", bg, presses, held_n,
                                 args.method, args.folds)
                     vs = "-" if plain is None else (f"{r['label'] / plain['label']:.2f} / "

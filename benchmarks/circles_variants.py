@@ -143,6 +143,18 @@ def _u8(a: np.ndarray) -> np.ndarray:
     return np.clip(a, 0, 255).round().astype(np.uint8)
 
 
+def ramp_light(a: np.ndarray, strength: float = RAMP) -> np.ndarray:
+    """A BGR frame under coloured side lights: each channel's light times a ramp from
+    1 - strength to 1 + strength across the frame, along its own direction (0, 120, 240
+    degrees), clipped to 8 bits."""
+    h, w = a.shape[:2]
+    yy, xx = np.mgrid[:h, :w]
+    u, v = 2 * xx / (w - 1) - 1, 2 * yy / (h - 1) - 1
+    gain = np.stack([1 + strength * (np.cos(t) * u + np.sin(t) * v) / math.sqrt(2)
+                     for t in np.deg2rad((0.0, 120.0, 240.0))], axis=-1)
+    return _u8(a * gain)
+
+
 def _same(c: Label, hw: tuple[int, int]) -> Label:
     """A circle of a variant that moves no pixel."""
     return c
@@ -217,15 +229,7 @@ def variant(s: PressSet, how: str, layer: np.ndarray | None) -> PressSet | None:
 
         return s.map(crop, lambda c, hw: (c[0] - hw[1] // 8, c[1] - hw[0] // 8, c[2]))
     if how == "ramp":  # coloured side lights falling off across the gel, every frame alike
-        def ramp(a: np.ndarray) -> np.ndarray:
-            h, w = a.shape[:2]
-            yy, xx = np.mgrid[:h, :w]
-            u, v = 2 * xx / (w - 1) - 1, 2 * yy / (h - 1) - 1
-            gain = np.stack([1 + RAMP * (np.cos(t) * u + np.sin(t) * v) / math.sqrt(2)
-                             for t in np.deg2rad((0.0, 120.0, 240.0))], axis=-1)
-            return _u8(a * gain)
-
-        return s.map(ramp, _same)
+        return s.map(ramp_light, _same)
     if how == "markers":
         if layer is None:
             return None
