@@ -452,25 +452,20 @@ def main() -> None:
     if not sets:
         raise SystemExit(f"no real press sets under {REAL}")
     layer = marker_layer()
-    if args.clip_speed:
-        print("| set | variant | frame | presses that clip | not restored, ms a press | "
-              "restored | ratio |")
-        print("|---|---|---|---:|---:|---:|---:|")
-        for s in sets:
-            for how in args.variants.split(","):
-                v = variant(s, how, layer)
-                if v is not None:
-                    print(clip_speed(v, how), flush=True)
-        return
-    if args.speed:
-        print("| set | variant | frame | usual map, ms a press | whole detector | ratio |")
-        print("|---|---|---|---:|---:|---:|")
-        for s in sets:
-            for how in args.variants.split(","):
-                v = variant(s, how, layer)
-                if v is not None:
-                    print(speed(v, how), flush=True)
-        return
+    timing = {"clip_speed": (clip_speed, "| set | variant | frame | presses that clip | not "
+                                         "restored, ms a press | restored | ratio |\n"
+                                         "|---|---|---|---:|---:|---:|---:|"),
+              "speed": (speed, "| set | variant | frame | usual map, ms a press | whole "
+                               "detector | ratio |\n|---|---|---|---:|---:|---:|")}
+    for flag, (row, head) in timing.items():
+        if getattr(args, flag):
+            print(head)
+            for s in sets:
+                for how in args.variants.split(","):
+                    v = variant(s, how, layer)
+                    if v is not None:
+                        print(row(v, how), flush=True)
+            return
     print("| set | variant | used | dropped | centre - label, median px (set's px) | within 3 px "
           "(set's px) | radius, median | within 10 % | both | beyond 3 px: label off its "
           "imprint | centre - as recorded, median / max (set's px) | held-out RMSE mm, "
