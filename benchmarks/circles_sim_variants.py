@@ -20,7 +20,8 @@ contacts of 0.5, 0.7, 0.85 and 0.95 of its radius (`DEEP_FRACS`), every layout, 
 
     nice -n 15 .venv/bin/python benchmarks/circles_sim_variants.py [--presses 16] [--folds 4]
         [--lights zones3,sides4,uniform] [--method poly] [--seed 0] [--jpeg gel|none|Q|lo-hi]
-        [--colour 420|422|444] [--ramp 0.4] [--deep | --deep-calibrate]
+        [--colour 420|422|444] [--ramp 0.4] [--gain 1.4] [--no-restore]
+        [--deep | --deep-calibrate]
 """
 
 from __future__ import annotations
@@ -47,13 +48,15 @@ GELS = ("none", "markers")
 
 def render_presses(lights: str, gel: str, shape: tuple[int, int], n: int, seed: int,
                    mm_per_px: float = MM_PER_PX, depths: list[float] | None = None,
-                   jpeg: tuple[int, int] | str | None = "gel", ramp: float = 0.0
+                   jpeg: tuple[int, int] | str | None = "gel", ramp: float = 0.0,
+                   gain: float = 1.0
                    ) -> tuple[np.ndarray, list[tuple[str, np.ndarray, tuple, object]]]:
     """The background and n presses (id, frame, exact circle, truth) of one layout, gel and
     frame shape; the same scenes and noise draws for every layout and gel. depths: press i
     that deep (mm) instead of a drawn depth. jpeg: the camera's JPEG quality range, None for
     none, "gel" the marker gel's own (60-90). ramp: every frame under coloured side lights
-    falling off across the gel (`circles_variants.ramp_light`), 0 for none."""
+    falling off across the gel (`circles_variants.ramp_light`), 0 for none. gain: every frame
+    that much brighter before the ramp, clipped to 8 bits (bright lobes clip)."""
     from circles_variants import ramp_light
 
     from vtsbench.sim.appearance import background, sensor_appearance
@@ -71,8 +74,8 @@ def render_presses(lights: str, gel: str, shape: tuple[int, int], n: int, seed: 
     fields = sensor(*shape, mm_per_px, lights=lights)
     cap = Capture(gel=seed)
     bg = background(app, fields, cap, np.random.default_rng([seed, 1]))
-    if ramp:
-        bg = ramp_light(bg, ramp)
+    if ramp or gain != 1.0:
+        bg = ramp_light(bg.astype(np.float32) * gain, ramp)
     out = []
     for i in range(n):
         rng = np.random.default_rng([seed, 2, i])
@@ -80,8 +83,8 @@ def render_presses(lights: str, gel: str, shape: tuple[int, int], n: int, seed: 
                             depth_mm=None if depths is None else depths[i])
         truth = render(scene.with_effects(dataclasses.replace(scene.effects, noise=False)))
         frame = relight(truth.grad, fields, cap, rng, app)[0]
-        if ramp:
-            frame = ramp_light(frame, ramp)
+        if ramp or gain != 1.0:
+            frame = ramp_light(frame.astype(np.float32) * gain, ramp)
         (cx, cy), r = scene.centers_px[0], math.sqrt(truth.contact[0].sum() / math.pi)
         out.append((f"press-{i:03d}", frame, (cx, cy, r), truth))
     return bg, out
@@ -209,8 +212,15 @@ def deep(lights: list[str], seed: int) -> None:
     print(f"\nMachine: {machine()}")
 
 
+def restored() -> bool:
+    """Whether the change map restores a clipped channel (not with --no-restore)."""
+    from vtsbench.depth import imprint
+
+    return imprint.restore_clipped.__name__ == "restore_clipped"
+
+
 def deep_calibrate(lights: list[str], seed: int, method: str, folds: int,
-                   ramp: float = 0.0) -> None:
+                   ramp: float = 0.0, gain: float = 1.0) -> None:
     """`calibrate --circles detect` end to end (the circles' checks included) on the --deep
     presses, ordered so that every fold holds one press of each contact fraction: presses used
     and dropped, the circles against the exact ones, and the held-out RMSE with detected and
@@ -223,7 +233,7 @@ def deep_calibrate(lights: list[str], seed: int, method: str, folds: int,
     print(f"Deep presses, calibrated: {len(depths)} presses of a {big} mm ball at "
           f"{DEEP_MM_PER_PX:.4f} mm/px, contacts of {', '.join(map(str, DEEP_FRACS))} ball "
           f"radii, each held out once in {folds} folds, {method}, seed {seed}, light ramp "
-          f"{ramp}\n")
+          f"{ramp}, gain {gain}{'' if restored() else ', not restored'}\n")
     print("| lights | gel | frame | used | dropped | centre error px, median / max | radius "
           "error, median / max | within 3 px and 10 % | held-out RMSE mm, exact circles | "
           "detected | ratio |")
@@ -234,7 +244,8 @@ def deep_calibrate(lights: list[str], seed: int, method: str, folds: int,
             for gel in GELS:
                 for frame, shape in SHAPES.items():
                     bg, presses = render_presses(name, gel, shape, len(depths), seed,
-                                                 DEEP_MM_PER_PX, depths, ramp=ramp)
+                                                 DEEP_MM_PER_PX, depths, ramp=ramp,
+                                                 gain=gain)
                     r = measure(Path(tmp), f"{name}-{frame}-{gel}", bg, presses, 4, method,
                                 folds, DEEP_MM_PER_PX)
                     print(f"| {name} | {gel} | {frame} | {r['used']} | {r['dropped']} | "
@@ -279,24 +290,35 @@ def main() -> None:
     ap.add_argument("--ramp", type=float, default=0.0,
                     help="coloured side lights falling off across the gel: each channel's light "
                          "1 -/+ this along its own direction (circles_variants.ramp_light)")
+    ap.add_argument("--gain", type=float, default=1.0,
+                    help="every frame this much brighter (clipped to 8 bits), before --ramp")
+    ap.add_argument("--no-restore", action="store_true",
+                    help="the change map without a clipped channel restored "
+                         "(imprint.restore_clipped), for comparison")
     ap.add_argument("--deep-calibrate", action="store_true",
                     help="calibrate end to end on the --deep presses: used, dropped, circles "
                          "and held-out RMSE")
     args = ap.parse_args()
     if args.colour != "420":
         colour_jpeg(args.colour)
+    if args.no_restore:
+        from vtsbench.depth import imprint
+
+        imprint.restore_clipped = lambda res, image, background: res
     if args.deep:
         deep(args.lights.split(","), args.seed)
         return
     if args.deep_calibrate:
-        deep_calibrate(args.lights.split(","), args.seed, args.method, args.folds, args.ramp)
+        deep_calibrate(args.lights.split(","), args.seed, args.method, args.folds, args.ramp,
+                       args.gain)
         return
     held_n = max(1, args.presses // 4)
     held = f"{held_n} held out" if args.folds <= 1 else \
         f"each held out once in {args.folds} folds"
     print(f"{args.presses} simulated presses of a 3 mm ball a variant at {MM_PER_PX} mm/px, "
           f"{held}, {args.method}, seed {args.seed}, JPEG {args.jpeg} colour {args.colour}, "
-          f"light ramp {args.ramp}\n")
+          f"light ramp {args.ramp}, gain {args.gain}"
+          f"{'' if restored() else ', not restored'}\n")
     print("| lights | gel | frame | used | dropped | centre error px, median / max | radius "
           "error, median / max | within 3 px and 10 % | markers found | held-out RMSE mm, "
           "exact circles | detected | ratio | x without markers (exact / detected) | time |")
@@ -309,7 +331,8 @@ def main() -> None:
                 for gel in GELS:
                     t0 = time.perf_counter()
                     bg, presses = render_presses(lights, gel, shape, args.presses, args.seed,
-                                                 jpeg=args.jpeg, ramp=args.ramp)
+                                                 jpeg=args.jpeg, ramp=args.ramp,
+                                                 gain=args.gain)
                     r = measure(Path(tmp), f"{lights}-{frame}-{gel}", bg, presses, held_n,
                                 args.method, args.folds)
                     vs = "-" if plain is None else (f"{r['label'] / plain['label']:.2f} / "
