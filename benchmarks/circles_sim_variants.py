@@ -212,15 +212,21 @@ def deep(lights: list[str], seed: int) -> None:
     print(f"\nMachine: {machine()}")
 
 
-def restored() -> bool:
-    """Whether the change map restores a clipped channel (not with --no-restore)."""
-    from vtsbench.depth import imprint
+def light_note(ramp: float, gain: float, restore: bool) -> str:
+    """The run's light and whether a clipped channel is restored, for its first line."""
+    return f"light ramp {ramp}, gain {gain}{'' if restore else ', not restored'}"
 
-    return imprint.restore_clipped.__name__ == "restore_clipped"
+
+def circle_cells(lights: str, gel: str, frame: str, r: dict) -> str:
+    """The first cells of a row, the same in every table: the variant, presses used and
+    dropped, and the circles against the exact ones."""
+    return (f"| {lights} | {gel} | {frame} | {r['used']} | {r['dropped']} | "
+            f"{r['centre_med']:.2f} / {r['centre_max']:.2f} | "
+            f"{r['radius_med']:.1%} / {r['radius_max']:.1%} | {r['good']:.0%} |")
 
 
 def deep_calibrate(lights: list[str], seed: int, method: str, folds: int,
-                   ramp: float = 0.0, gain: float = 1.0) -> None:
+                   ramp: float = 0.0, gain: float = 1.0, restore: bool = True) -> None:
     """`calibrate --circles detect` end to end (the circles' checks included) on the --deep
     presses, ordered so that every fold holds one press of each contact fraction: presses used
     and dropped, the circles against the exact ones, and the held-out RMSE with detected and
@@ -232,8 +238,8 @@ def deep_calibrate(lights: list[str], seed: int, method: str, folds: int,
     depths = [big - math.sqrt(big**2 - (f * big) ** 2) for f in fracs]
     print(f"Deep presses, calibrated: {len(depths)} presses of a {big} mm ball at "
           f"{DEEP_MM_PER_PX:.4f} mm/px, contacts of {', '.join(map(str, DEEP_FRACS))} ball "
-          f"radii, each held out once in {folds} folds, {method}, seed {seed}, light ramp "
-          f"{ramp}, gain {gain}{'' if restored() else ', not restored'}\n")
+          f"radii, each held out once in {folds} folds, {method}, seed {seed}, "
+          f"{light_note(ramp, gain, restore)}\n")
     print("| lights | gel | frame | used | dropped | centre error px, median / max | radius "
           "error, median / max | within 3 px and 10 % | held-out RMSE mm, exact circles | "
           "detected | ratio |")
@@ -248,11 +254,8 @@ def deep_calibrate(lights: list[str], seed: int, method: str, folds: int,
                                                  gain=gain)
                     r = measure(Path(tmp), f"{name}-{frame}-{gel}", bg, presses, 4, method,
                                 folds, DEEP_MM_PER_PX)
-                    print(f"| {name} | {gel} | {frame} | {r['used']} | {r['dropped']} | "
-                          f"{r['centre_med']:.2f} / {r['centre_max']:.2f} | "
-                          f"{r['radius_med']:.1%} / {r['radius_max']:.1%} | {r['good']:.0%} | "
-                          f"{r['label']:.4f} | {r['detect']:.4f} | "
-                          f"{r['detect'] / r['label']:.2f}x |", flush=True)
+                    print(f"{circle_cells(name, gel, frame, r)} {r['label']:.4f} | "
+                          f"{r['detect']:.4f} | {r['detect'] / r['label']:.2f}x |", flush=True)
     print(f"\nTotal {time.perf_counter() - t0:.0f} s. Machine: {machine()}")
 
 
@@ -310,15 +313,14 @@ def main() -> None:
         return
     if args.deep_calibrate:
         deep_calibrate(args.lights.split(","), args.seed, args.method, args.folds, args.ramp,
-                       args.gain)
+                       args.gain, not args.no_restore)
         return
     held_n = max(1, args.presses // 4)
     held = f"{held_n} held out" if args.folds <= 1 else \
         f"each held out once in {args.folds} folds"
     print(f"{args.presses} simulated presses of a 3 mm ball a variant at {MM_PER_PX} mm/px, "
           f"{held}, {args.method}, seed {args.seed}, JPEG {args.jpeg} colour {args.colour}, "
-          f"light ramp {args.ramp}, gain {args.gain}"
-          f"{'' if restored() else ', not restored'}\n")
+          f"{light_note(args.ramp, args.gain, not args.no_restore)}\n")
     print("| lights | gel | frame | used | dropped | centre error px, median / max | radius "
           "error, median / max | within 3 px and 10 % | markers found | held-out RMSE mm, "
           "exact circles | detected | ratio | x without markers (exact / detected) | time |")
@@ -338,9 +340,7 @@ def main() -> None:
                     vs = "-" if plain is None else (f"{r['label'] / plain['label']:.2f} / "
                                                     f"{r['detect'] / plain['detect']:.2f}")
                     plain = r if gel == "none" else plain
-                    print(f"| {lights} | {gel} | {frame} | {r['used']} | {r['dropped']} | "
-                          f"{r['centre_med']:.2f} / {r['centre_max']:.2f} | "
-                          f"{r['radius_med']:.1%} / {r['radius_max']:.1%} | {r['good']:.0%} | "
+                    print(f"{circle_cells(lights, gel, frame, r)} "
                           f"{r['markers']} | {r['label']:.4f} | {r['detect']:.4f} | "
                           f"{r['detect'] / r['label']:.2f}x | {vs} | "
                           f"{time.perf_counter() - t0:.0f} s |", flush=True)
