@@ -771,7 +771,8 @@ def _stronger_outside(m: np.ndarray, r: float, d2: np.ndarray) -> bool:
     the imprint. Measured (`benchmarks/circles_variants.py`, both real sets and 23 variants):
     the circle's own change is 1.67 times the other or more on every labelled and every used
     detected circle but one 7 px off (1.17); 0.54 on a contact cut by the frame's border whose
-    red lobe clips at 255, where the circle was found 29 px off around the clipped area. Costs
+    red lobe clips at 255, where the circle was found 29 px off around the clipped area (before
+    the change map restored clipped channels, `imprint.restore_clipped`). Costs
     2.1 ms at 320x240 (`circle_doubts` 19 -> 22 ms a press, best of 5; 2 cores, AMD EPYC).
     r: the circle's radius; d2: each pixel's squared distance to its centre (`circle_doubts`'s)."""
     inside, outside = m[d2 <= (INSIDE_TO * r) ** 2], m[d2 >= (OUTSIDE_FROM * r) ** 2]
