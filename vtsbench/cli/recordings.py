@@ -1,5 +1,6 @@
-"""The recordings stage's commands: simulate, check, manifest, preview, stats and collect. Each
-parses its options, calls one library function (imported inside it) and prints the result."""
+"""The recordings stage's commands: simulate, check, manifest, import-presses, preview, stats
+and collect. Each parses its options, calls one library function (imported inside it) and
+prints the result."""
 
 from __future__ import annotations
 
@@ -157,6 +158,49 @@ def manifest(
                            markers=tuple(marker or ()), progress=True)
     m, path = run(write_pattern_manifest, folder, opts)
     typer.echo(f"wrote {path}: {len(m.entries)} entries in {len(m.sessions)} session(s)")
+
+
+def import_presses(
+    src: Annotated[Path, typer.Argument(
+        help="A gs_sdk calibration folder (catalog.csv, <ball>/<n>/gelsight.png and label.npz, "
+             "background.png) or a Taxim data pack (.npz).")],
+    out: Annotated[Path, typer.Option(
+        help="Recordings folder to write recordings.json into (a gs_sdk folder's files stay "
+             "where they are and may be SRC itself; a Taxim pack's frames are written here).")],
+    mm_per_px: Annotated[float | None, number_option(
+        low=1e-6, high=lim.MAX_MM_PER_PX,
+        help="Scale in mm per pixel (default: --config's ppmm; Taxim: 0.1245).")] = None,
+    config: Annotated[Path | None, typer.Option(
+        help="gs_sdk sensor config (YAML) whose 'ppmm' key holds mm per pixel, e.g. "
+             "gsmini.yaml.")] = None,
+    ball_radius_mm: Annotated[float | None, number_option(
+        low=1e-6, high=lim.MAX_MM,
+        help="Taxim packs: ball radius in mm (default 2). A gs_sdk catalog gives each press's "
+             "ball diameter.")] = None,
+    sensor: Annotated[str | None, str_option(
+        help="Sensor id (default: gelsight, or gelsight-taxim).")] = None,
+    overwrite: Annotated[bool, typer.Option(
+        "--overwrite", help="Replace an existing recordings.json.")] = False,
+) -> None:
+    """Turn ball-press calibration data from gs_sdk or Taxim into a recordings folder that
+    `vtsbench calibrate` reads: circles, ball sizes, background and scale carried over.
+
+    Example: [bold]vtsbench import-presses calib_dir --out recordings/mine --config gsmini.yaml[/]
+    """
+    from ..recordings.press_folders import import_presses as run_import
+
+    def warn(msg: str) -> None:
+        typer.echo(f"warning: {msg}", err=True)
+
+    s = run(run_import, src, out, mm_per_px=mm_per_px, ball_radius_mm=ball_radius_mm,
+            config=config, sensor=sensor, overwrite=overwrite, warn=warn)
+    balls = ", ".join(f"{r:g}" for r in s.ball_radii_mm)
+    scale = f"{s.mm_per_px:g} mm/px" if s.mm_per_px is not None else \
+        "no scale (pass --mm-per-px to calibrate)"
+    bg = "background" if s.background else "no background (calibrate --estimate-background)"
+    typer.echo(f"wrote {s.path}: {s.presses} presses ({s.labelled} with labelled circles) "
+               f"from a {s.layout} {'folder' if s.layout == 'gs_sdk' else 'pack'}; ball radius "
+               f"{balls} mm; {scale}; {bg}")
 
 
 def preview(

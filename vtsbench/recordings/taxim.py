@@ -12,18 +12,19 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import VtsError
-from .manifest import Circle, Entry, Manifest, Session, Source, save_manifest
+from .manifest import MANIFEST_NAME, Circle, Entry, Manifest, Session, Source, save_manifest
 from .media import write_png
 
 
 def taxim_recordings(npz: str | Path, out: str | Path, *, ball_radius_mm: float = 2.0,
-                     mm_per_px: float = 0.1245) -> Path:
+                     mm_per_px: float = 0.1245, sensor: str = "gelsight-taxim") -> Path:
     """A recordings folder for a Taxim-style data pack of GelSight presses, written to out.
 
     The archive holds the background `f0` (H x W x 3), the presses `imgs` (N x H x W x 3, RGB)
     and their labelled circles (`touch_center` N x 2 as x, y and `touch_radius` N, px). The
     defaults are those of Taxim's `dataPack_small.npz`: a 2 mm-radius ball at 0.1245 mm/px;
-    give another pack's ball and scale. Arrays are checked before anything is written.
+    give another pack's ball and scale. Arrays are checked before anything is written, and
+    recordings.json last, so an interrupted run never looks complete.
     """
     npz, out = Path(npz), Path(out)
     for name, v in (("ball_radius_mm", ball_radius_mm), ("mm_per_px", mm_per_px)):
@@ -50,6 +51,7 @@ def taxim_recordings(npz: str | Path, out: str | Path, *, ball_radius_mm: float 
         raise VtsError(f"not a Taxim data pack: {problem}", npz)
     radius = radius.reshape(-1)
     (out / "presses").mkdir(parents=True, exist_ok=True)
+    (out / MANIFEST_NAME).unlink(missing_ok=True)  # stale while the frames are rewritten
     write_png(out / "background.png", np.ascontiguousarray(f0, np.uint8))
     h, w = f0.shape[:2]
     entries = []
@@ -61,7 +63,7 @@ def taxim_recordings(npz: str | Path, out: str | Path, *, ball_radius_mm: float 
                              circle=Circle(float(centre[i, 0]), float(centre[i, 1]),
                                            float(radius[i]))))
     scale = (float(mm_per_px), float(mm_per_px))
-    m = Manifest(sessions=[Session("s0", "gelsight-taxim", (h, w), scale,
+    m = Manifest(sessions=[Session("s0", sensor, (h, w), scale,
                                    background="background.png")],
                  entries=entries, name="taxim-gelsight-ball",
                  description=f"Taxim-style GelSight ball presses ({npz.name})",
