@@ -88,6 +88,22 @@ def test_cli_import_then_calibrate(sim, tmp_path) -> None:
     assert cal.fit["holdout_mean"]["plane_aligned_rmse_mm"] < 0.05
 
 
+def test_jpeg_presses_and_background(sim, tmp_path) -> None:
+    """A camera that saves JPEG: gelsight.jpg and background.jpg are read like the PNGs."""
+    import cv2
+
+    src = gs_folder(sim, tmp_path / "calib")
+    for png in [src / "background.png", *src.glob("*/*/gelsight.png")]:
+        cv2.imwrite(str(png.with_suffix(".jpg")), cv2.imread(str(png)),
+                    [cv2.IMWRITE_JPEG_QUALITY, 90])
+        png.unlink()
+    s = import_presses(src, tmp_path / "rec", config=src / "sensor.yaml")
+    assert s.presses == 10 and s.background
+    m = load_manifest(tmp_path / "rec")
+    assert m.sessions[0].background.endswith("background.jpg")
+    assert all(e.source.path.endswith("gelsight.jpg") for e in m.entries)
+
+
 def test_import_in_place_and_overwrite(sim, tmp_path) -> None:
     src = gs_folder(sim, tmp_path / "calib", labels=False)
     s = import_presses(src, src, mm_per_px=0.05)
@@ -113,6 +129,18 @@ def _edit(src: Path, case: str) -> None:
         cat.write_text("\n".join(lines) + "\n")
     elif case == "no image":
         (src / "6.000mm/4/gelsight.png").unlink()
+        write_png(src / "6.000mm/4/labeled.png", np.zeros((120, 160, 3), np.uint8))
+    elif case == "no folder":
+        import shutil
+
+        shutil.rmtree(src / "6.000mm/4")
+    elif case == "two images":
+        import cv2
+
+        img = cv2.imread(str(src / "6.000mm/4/gelsight.png"))
+        (src / "6.000mm/4/gelsight.png").unlink()
+        cv2.imwrite(str(src / "6.000mm/4/gelsight.jpg"), img)
+        cv2.imwrite(str(src / "6.000mm/4/gelsight.bmp"), img)
     elif case == "other size":
         write_png(src / "6.000mm/5/gelsight.png", np.zeros((100, 160, 3), np.uint8))
     elif case == "background size":
@@ -130,7 +158,9 @@ def _edit(src: Path, case: str) -> None:
     ("row 6.000mm/1,-6", "row 3: diameter '-6' is not a positive size"),
     ("row 6.000mm/1,six", "row 3: diameter 'six' is not a number"),
     ("row 6.000mm/0,6.0", "row 3: '6.000mm/0' is listed twice"),
-    ("no image", "no gelsight.png for the catalog's '6.000mm/4'"),
+    ("no image", "no gelsight.png (or .jpg...) for the catalog's '6.000mm/4'"),
+    ("no folder", "no folder for the catalog's '6.000mm/4'"),
+    ("two images", "2 images named gelsight: gelsight.bmp, gelsight.jpg"),
     ("other size", "frame is 100x160, the first press 120x160"),
     ("background size", "background is 120x150, the presses 120x160"),
     ("not an image", "gelsight.png"),

@@ -1,7 +1,8 @@
 """Ball-press calibration data in the two layouts labs already have, as a recordings folder.
 
 - A **gs_sdk calibration folder**: `catalog.csv` (`experiment_reldir`, `diameter(mm)`), one
-  folder per press with `gelsight.png` (written by OpenCV) and the labelled circle `label.npz`
+  folder per press with `gelsight.png` (written by OpenCV; `gelsight.jpg` and other image
+  types are read too) and the labelled circle `label.npz`
   (`center` x, y and `radius`, px), and `background.png`; the sensor's scale in a config YAML
   whose `ppmm` key holds millimetres per pixel. The files stay where they are: the manifest
   written points back to them.
@@ -28,9 +29,9 @@ from .manifest import MANIFEST_NAME, Circle, Entry, Manifest, Session, Source, s
 from .media import probe
 
 CATALOG = "catalog.csv"
-PRESS_IMAGE = "gelsight.png"
+PRESS_IMAGE = "gelsight"  # gelsight.png as gs_sdk writes it; .jpg etc. from other cameras
 LABEL = "label.npz"
-BACKGROUND = "background.png"
+BACKGROUND = "background"
 CATALOG_DIR, CATALOG_DIAMETER = "experiment_reldir", "diameter(mm)"
 MAX_LABEL_BYTES = 1 << 20  # a label is two numbers; 1 MiB leaves room and stops a zip bomb
 MAX_CONFIG_BYTES = 1 << 20
@@ -164,6 +165,20 @@ def read_catalog(folder: Path) -> list[tuple[str, float]]:
     return out
 
 
+def find_image(folder: Path, stem: str) -> Path | None:
+    """folder/stem.png, or the one other image file of that stem (.jpg, .bmp...)."""
+    from .media import IMAGE_EXTS
+
+    png = folder / f"{stem}.png"
+    if png.is_file():
+        return png
+    hits = sorted(p for p in folder.glob(f"{stem}.*") if p.suffix.lower() in IMAGE_EXTS)
+    if len(hits) > 1:
+        raise VtsError(f"{len(hits)} images named {stem}: {', '.join(p.name for p in hits)}",
+                       folder)
+    return hits[0] if hits else None
+
+
 def _entry_id(rel: str) -> str:
     """'4.700mm/12' -> '4.700mm-12' (the manifest's id alphabet)."""
     import re
@@ -196,9 +211,12 @@ def gs_sdk_manifest(folder: Path, home: Path, *, mm_per_px: float | None = None,
     size: tuple[int, int] | None = None
     entries: list[Entry] = []
     for rel, dia in rows:
-        image = folder / rel / PRESS_IMAGE
-        if not image.is_file():
-            raise VtsError(f"no {PRESS_IMAGE} for the catalog's {rel!r}", image)
+        if not (folder / rel).is_dir():
+            raise VtsError(f"no folder for the catalog's {rel!r}", folder / rel)
+        image = find_image(folder / rel, PRESS_IMAGE)
+        if image is None:
+            raise VtsError(f"no {PRESS_IMAGE}.png (or .jpg...) for the catalog's {rel!r}",
+                           folder / rel)
         pr = probe(image)
         if pr.kind != "image":
             raise VtsError(f"not an image ({pr.kind})", image)
@@ -221,8 +239,8 @@ def gs_sdk_manifest(folder: Path, home: Path, *, mm_per_px: float | None = None,
         say(f"{config} gives frames of {cfg_size[0]}x{cfg_size[1]}; the presses are "
             f"{size[0]}x{size[1]} (the presses' size is used)")
     background = None
-    bg = folder / BACKGROUND
-    if bg.exists():
+    bg = find_image(folder, BACKGROUND)
+    if bg is not None:
         pb = probe(bg)
         if (pb.height, pb.width) != size:
             raise VtsError(f"background is {pb.height}x{pb.width}, the presses "
