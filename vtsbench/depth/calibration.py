@@ -581,6 +581,15 @@ def _circle(c: tuple[float, float, float] | None) -> dict[str, float | None] | N
     return None if c is None else {"x": _num(c[0]), "y": _num(c[1]), "r": _num(c[2])}
 
 
+def label_agreement(label: tuple[float, float, float], found: tuple[float, float, float],
+                    ball_px: float) -> dict[str, float]:
+    """How far a detected circle lies from its label: the centres' distance (px) and the
+    radius error with both radii clamped below the ball as the fit clamps them (`Rim`)."""
+    top = Rim().max_radius_frac * ball_px
+    return {"label_offset_px": float(math.hypot(found[0] - label[0], found[1] - label[1])),
+            "label_radius_error": float(min(found[2], top) / min(label[2], top) - 1)}
+
+
 def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
                  background: Path | None = None, estimate_background: bool = False,
                  circles: str = "label"
@@ -662,6 +671,8 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
                                 f"({'; '.join(doubts)}); detected again from the imprint: "
                                 f"({again[0]:.1f}, {again[1]:.1f}) r {again[2]:.1f} px")
                 use, found, doubts = again, again, []
+        if label is not None and found is not None:
+            row.update(label_agreement(label, found, ball))
         if use is None:
             row.update(status="dropped", reasons=["no visible contact: no circle detected"])
         elif doubts and source == "detected":

@@ -47,6 +47,32 @@ def _box(h_: HeldOut, shape: tuple[int, int]) -> tuple[int, int, int, int]:
     return y0, y1, x0, x1
 
 
+#: Agreement of a detected circle with its label: centres within this many pixels, radii
+#: within this fraction (after the clamp below the ball both get).
+AGREE_PX, AGREE_RADIUS = 3.0, 0.10
+
+
+def circles_vs_labels(rows: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """Detected against labelled circles over the labelled presses whose circle was detected
+    (`--circles detect`): medians and the shares within AGREE_PX and AGREE_RADIUS; a labelled
+    press where nothing was detected counts as outside both. None when no press has both."""
+    labelled = [r for r in rows if r.get("label") is not None]
+    compared = [r for r in labelled if r.get("source") == "detected"]
+    if not compared or not any("label_offset_px" in r for r in compared):
+        return None
+    off = np.array([r.get("label_offset_px", np.inf) for r in compared])
+    rad = np.array([r.get("label_radius_error", np.inf) for r in compared])
+    found = np.isfinite(off)
+    near, close = off <= AGREE_PX, np.abs(rad) <= AGREE_RADIUS
+    return {"presses": len(compared), "detected": int(found.sum()),
+            "centre_median_px": float(np.median(off[found])),
+            "centre_max_px": float(off[found].max()),
+            "radius_median": float(np.median(rad[found])),
+            "within_px": AGREE_PX, "within_radius": AGREE_RADIUS,
+            "share_centre": float(near.mean()), "share_radius": float(close.mean()),
+            "share_both": float((near & close).mean())}
+
+
 def summary(run: CalibrationRun) -> dict[str, Any]:
     """The report's JSON: method, fit statistics and the shown presses' errors (mm)."""
     cal = run.calibration
@@ -62,7 +88,8 @@ def summary(run: CalibrationRun) -> dict[str, Any]:
             "n_presses": cal.n_presses, "seconds": round(run.seconds, 2),
             "train_gradient_rmse": cal.fit.get("train_gradient_rmse"),
             "holdout_mean": cal.fit.get("holdout_mean", {}), "presses": rows,
-            "circles": run.presses, "dropped": run.dropped, "doubted": run.doubted,
+            "circles": run.presses, "circles_vs_labels": circles_vs_labels(run.presses),
+            "dropped": run.dropped, "doubted": run.doubted,
             "retried": run.retried,
             "warnings": run.warnings}
 

@@ -11,7 +11,7 @@ from typing import Any
 
 from ..errors import VtsError
 from .calibration import SOLVERS, calibrate, save_calibration
-from .report import write_report
+from .report import circles_vs_labels, write_report
 
 #: The mapping options each method takes; any other given is an error naming it.
 METHOD_OPTIONS: dict[str, frozenset[str]] = {
@@ -86,6 +86,16 @@ def summary_lines(run: Any, out: Path, png: Path, method: str, seconds: float) -
         lines.append("  by solver (contact RMSE, peak error, lowest depth, mean |depth| on the "
                      "border): " + "; ".join(parts)
                      + " (masked: zero outside the contact, for absolute depth)")
+    agree = circles_vs_labels(run.presses)
+    if agree is not None:
+        missed = agree["presses"] - agree["detected"]
+        lines.append(
+            f"detected circles against the {agree['presses']} labels: centre off a median "
+            f"{agree['centre_median_px']:.2f} px (at most {agree['centre_max_px']:.2f}), "
+            f"{agree['share_centre']:.0%} within {agree['within_px']:g} px; radius a median "
+            f"{agree['radius_median']:+.1%}, {agree['share_radius']:.0%} within "
+            f"{agree['within_radius']:.0%}; {agree['share_both']:.0%} within both"
+            + (f" ({missed} labelled press(es) with no circle detected)" if missed else ""))
     caveat = "".join(
         f"; {len(ids)} press(es) {what} ({', '.join(ids[:LISTED_IDS])}"
         f"{', ...' if len(ids) > LISTED_IDS else ''}, see report.json)"
