@@ -954,6 +954,9 @@ def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = 
         "holdout_mean": {kk: _num(float(np.mean([r.errors[kk] for r in results])))
                          for kk in keys} if results else {},
     }
+    if circles == "detect":  # the held-out presses scored against their labels as well
+        cal.fit["holdout_vs_labels"] = _scored_against_labels(cal, results, setup["presses"],
+                                                              solver)
     if results:  # every solver's absolute error and artefacts, side by side
         cal.fit["holdout_mean"].update({
             f"{s}_{kk}": _num(float(np.mean([r.by_solver[s][kk] for r in results])))
@@ -962,6 +965,24 @@ def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = 
                                    for p in train[:3]]
     return CalibrationRun(cal, results, warnings, time.perf_counter() - t0, examples,
                           setup["presses"], setup["frames"])
+
+
+def _scored_against_labels(cal: Calibration, results: list[HeldOut],
+                           rows: list[dict[str, Any]], solver: str) -> dict[str, Any]:
+    """Held-out presses of a run on detected circles scored against the spheres at their
+    labelled circles (presses with a label and no simulated truth): the figure to set beside
+    a run on the labels with the same seed."""
+    labels = {r["id"]: r["label"] for r in rows if r.get("label") is not None}
+    scored = []
+    for r in results:
+        lab = labels.get(r.press.id)
+        if r.reference != "sphere" or lab is None:
+            continue
+        p = replace(r.press, x=lab["x"], y=lab["y"], r=lab["r"], circle_source="label")
+        scored.append((r.press.id, evaluate_press(cal, p, solver=solver).errors))
+    vals = [e["plane_aligned_rmse_mm"] for _, e in scored]
+    return {"presses": len(scored), "ids": [i for i, _ in scored],
+            "plane_aligned_rmse_mm": _num(float(np.mean(vals))) if vals else None}
 
 
 def _num(v: float) -> float | None:

@@ -80,6 +80,11 @@ def summary_lines(run: Any, out: Path, png: Path, method: str, seconds: float) -
                      f"{mm('plane_aligned_rmse_mm')}, contact RMSE {mm('contact_rmse_mm')}, "
                      f"peak error {mm('peak_depth_error_mm', '+')}, gradient RMSE "
                      f"{m['gradient_rmse']:.4f}")
+        vs = run.calibration.fit.get("holdout_vs_labels") or {}
+        if vs.get("plane_aligned_rmse_mm") is not None:
+            lines.append(f"  the same {vs['presses']} held-out press(es) scored against their "
+                         f"labelled circles: plane-aligned RMSE {vs['plane_aligned_rmse_mm']:.4f}"
+                         " mm (set beside a run with --circles label and the same --seed)")
         parts = [f"{s} {mm(s + '_contact_rmse_mm')}, {mm(s + '_peak_depth_error_mm', '+')}, "
                  f"{mm(s + '_min_depth_mm', '+')}, {mm(s + '_border_abs_mm')}"
                  for s in SOLVERS]
