@@ -294,3 +294,16 @@ def test_real_taxim_presses_laid_out_by_gs_sdk_match_the_pack(tmp_path) -> None:
                               read_image(tmp_path / "tx" / eb.source.path))
     assert np.array_equal(read_image(tmp_path / "gs" / a.sessions[0].background),
                           read_image(tmp_path / "tx" / b.sessions[0].background))
+
+
+def test_commands_on_an_unimported_folder_or_pack_point_to_the_import(sim, tmp_path) -> None:
+    src = gs_folder(sim, tmp_path / "calib")
+    res = CliRunner().invoke(app, ["calibrate", str(src), "--out", str(tmp_path / "c.st")])
+    assert res.exit_code == 2 and len(res.stderr.strip().splitlines()) == 1
+    assert f"`vtsbench import-presses {src} --out REC`" in res.stderr
+    pack = tmp_path / "p.npz"
+    np.savez(pack, f0=np.zeros((4, 4, 3), np.uint8))
+    res = CliRunner().invoke(app, ["calibrate", str(pack), "--out", str(tmp_path / "c.st")])
+    assert res.exit_code == 2 and f"`vtsbench import-presses {pack} --out REC`" in res.stderr
+    res = CliRunner().invoke(app, ["calibrate", str(tmp_path), "--out", str(tmp_path / "c.st")])
+    assert res.exit_code == 2 and "write one with `vtsbench manifest`" in res.stderr
