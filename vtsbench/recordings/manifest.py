@@ -300,11 +300,15 @@ def read_manifest_doc(folder: str | Path) -> tuple[Path, Any]:
     """Read the raw JSON of a folder's manifest, raising a one-line error if absent or invalid."""
     folder = Path(folder)
     if not folder.is_dir():
-        raise VtsError("not a folder (expected a recordings folder)", folder)
+        hint = (f"; a data pack of ball presses becomes one with `vtsbench import-presses "
+                f"{folder} --out REC`" if folder.suffix.lower() == ".npz" else "")
+        raise VtsError(f"not a folder (expected a recordings folder){hint}", folder)
     path = folder / MANIFEST_NAME
     if not path.is_file():
-        raise VtsError(f"no {MANIFEST_NAME} (write one with `vtsbench manifest` or "
-                       "`vtsbench collect`)", folder)
+        how = ("it looks like a gs_sdk calibration folder: `vtsbench import-presses "
+               f"{folder} --out REC` describes it" if (folder / "catalog.csv").is_file()
+               else "write one with `vtsbench manifest` or `vtsbench collect`")
+        raise VtsError(f"no {MANIFEST_NAME} ({how})", folder)
     from ..jsonio import read_json
 
     return path, read_json(path)
