@@ -8,8 +8,9 @@ PRINT_DPI, rendered in memory and written atomically. Text is never below MIN_FO
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -18,8 +19,13 @@ PRINT_DPI = 150
 #: The smallest text size in a figure, in points.
 MIN_FONT_PT = 9.0
 
+#: Text is drawn as written: sensor ids, object and folder names are the user's, and a '$' in
+#: one would start matplotlib's TeX, which raises on what it cannot parse ('gs$\\frac{a$mini'
+#: as a sensor id failed the calibration report with a traceback).
+PLAIN_TEXT = {"text.parse_math": False}
+
 #: matplotlib settings of print_style: every text element at MIN_FONT_PT or more.
-STYLE = {"font.size": 10.0, "axes.titlesize": 10.0, "axes.labelsize": 10.0,
+STYLE = {**PLAIN_TEXT, "font.size": 10.0, "axes.titlesize": 10.0, "axes.labelsize": 10.0,
          "xtick.labelsize": MIN_FONT_PT, "ytick.labelsize": MIN_FONT_PT,
          "legend.fontsize": MIN_FONT_PT, "figure.titlesize": 11.0,
          "figure.dpi": PRINT_DPI, "savefig.dpi": PRINT_DPI}
@@ -32,6 +38,18 @@ def print_style() -> Iterator[None]:
 
     with matplotlib.rc_context(STYLE):
         yield
+
+
+def plain_text(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Decorator: the figures drawn inside `fn` show their text as written (PLAIN_TEXT)."""
+    @functools.wraps(fn)
+    def drawn(*args: Any, **kwargs: Any) -> Any:
+        import matplotlib
+
+        with matplotlib.rc_context(PLAIN_TEXT):
+            return fn(*args, **kwargs)
+
+    return drawn
 
 
 def font_pt(size: float) -> float:

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from ..figures import plain_text
 from .calibration import CalibrationRun, HeldOut
 
 MAX_ROWS = 8
@@ -94,6 +95,7 @@ def summary(run: CalibrationRun) -> dict[str, Any]:
             "warnings": run.warnings}
 
 
+@plain_text
 def write_report(run: CalibrationRun, folder: str | Path) -> tuple[Path, Path]:
     """Write report.png and report.json into folder; returns their paths."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -199,6 +201,7 @@ def _tile_text(rec: dict[str, Any], held: set[str]) -> str:
     return "\n".join(lines[:6])
 
 
+@plain_text
 def contact_sheet(run: CalibrationRun, path: str | Path) -> Path:
     """Every press of the run as a tile around its circle: the labelled circle (dashed) and the
     detected one in their own colours, the circle used thicker, status and reasons beneath."""

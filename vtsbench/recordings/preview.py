@@ -7,6 +7,7 @@ import random
 from pathlib import Path
 
 from ..errors import VtsError
+from ..figures import plain_text
 from ..labels import DIRECTION_NAMES
 from .manifest import Entry, Manifest, load_manifest
 from .media import read_frame
@@ -55,6 +56,7 @@ def _caption(e: Entry) -> str:
     return "\n".join([" | ".join(parts[:2]), " | ".join(parts[2:])])
 
 
+@plain_text
 def write_preview(folder: str | Path, out: str | Path, n: int = 12, seed: int = 0) -> int:
     """Render up to n entries of a recordings folder to a PNG contact sheet; returns how many."""
     if Path(out).is_dir():

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ...figures import plain_text
 from ...labels import DIRECTION_NAMES, STATES
 
 
@@ -24,6 +25,7 @@ def labels_text(info: Any, class_idx: int | None, state_idx: int | None = None,
     return ", ".join(parts)
 
 
+@plain_text
 def plot_arrays(rgb: np.ndarray | None, depth: np.ndarray | None, contact: np.ndarray | None,
                 title: str) -> Any:
     """A Figure with one panel per array given: rgb (H, W, 3) uint8 or float in [0, 1],
