@@ -307,3 +307,51 @@ def test_commands_on_an_unimported_folder_or_pack_point_to_the_import(sim, tmp_p
     assert res.exit_code == 2 and f"`vtsbench import-presses {pack} --out REC`" in res.stderr
     res = CliRunner().invoke(app, ["calibrate", str(tmp_path), "--out", str(tmp_path / "c.st")])
     assert res.exit_code == 2 and "write one with `vtsbench manifest`" in res.stderr
+
+
+def _small_pack(path: Path, n: int = 4) -> None:
+    rng = np.random.default_rng(1)
+    np.savez(path, f0=rng.integers(0, 255, (12, 16, 3), dtype=np.uint8),
+             imgs=rng.integers(0, 255, (n, 12, 16, 3), dtype=np.uint8),
+             touch_center=rng.uniform(4, 8, (n, 2)), touch_radius=rng.uniform(2, 4, n))
+
+
+@pytest.mark.parametrize("again", [False, True])
+def test_taxim_import_killed_at_every_write_never_looks_done(monkeypatch, tmp_path,
+                                                             again) -> None:
+    """Killed at each atomic write (every frame, then recordings.json), a first import and a
+    re-import over a finished one leave no recordings.json; a rerun then completes."""
+    from tests.fixtures.faults import Crash, FailingOs, count_renames
+    from vtsbench import atomic
+
+    pack = tmp_path / "p.npz"
+    _small_pack(pack)
+    done = tmp_path / "done"
+    n = count_renames(monkeypatch, lambda: import_presses(pack, done))
+    assert n == 4 + 1 + 1  # background, four frames, recordings.json last
+    for k in range(1, n + 1):
+        out = tmp_path / f"k{k}"
+        if again:
+            import_presses(pack, out)
+        monkeypatch.setattr(atomic, "os", FailingOs(k))
+        with pytest.raises(Crash):
+            import_presses(pack, out, overwrite=again)
+        monkeypatch.setattr(atomic, "os", __import__("os"))
+        assert not (out / "recordings.json").exists(), k
+        import_presses(pack, out, overwrite=True)
+        assert load_manifest(out) == load_manifest(done)
+
+
+def test_gs_sdk_reimport_killed_keeps_the_previous_manifest(sim, monkeypatch, tmp_path) -> None:
+    from tests.fixtures.faults import Crash, FailingOs
+    from vtsbench import atomic
+
+    src = gs_folder(sim, tmp_path / "calib")
+    import_presses(src, tmp_path / "rec", mm_per_px=0.05)
+    before = (tmp_path / "rec" / "recordings.json").read_bytes()
+    monkeypatch.setattr(atomic, "os", FailingOs(1))
+    with pytest.raises(Crash):
+        import_presses(src, tmp_path / "rec", overwrite=True, config=src / "sensor.yaml")
+    monkeypatch.setattr(atomic, "os", __import__("os"))
+    assert (tmp_path / "rec" / "recordings.json").read_bytes() == before
+    assert not [p for p in (tmp_path / "rec").iterdir() if p.name != "recordings.json"]
