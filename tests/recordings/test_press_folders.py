@@ -355,3 +355,24 @@ def test_gs_sdk_reimport_killed_keeps_the_previous_manifest(sim, monkeypatch, tm
     monkeypatch.setattr(atomic, "os", __import__("os"))
     assert (tmp_path / "rec" / "recordings.json").read_bytes() == before
     assert not [p for p in (tmp_path / "rec").iterdir() if p.name != "recordings.json"]
+
+
+def test_a_catalog_of_two_balls_passes_the_scale_check(sim, tmp_path) -> None:
+    """gs_sdk catalogs mix balls: the circles of most presses, on a large ball, are larger than
+    the smallest ball allows, and are not taken for a wrong scale."""
+    from vtsbench.depth.calibration import load_presses
+
+    src = gs_folder(sim, tmp_path / "calib")
+    # three presses said to be of a 2 mm ball with their circles a third the size (the rest
+    # are the 6 mm ball's, 18-35 px against the 2 mm ball's 16.7 px)
+    rows = (src / "catalog.csv").read_text().splitlines()
+    for k in (1, 2, 3):
+        rel = rows[k].split(",")[0]
+        rows[k] = f"{rel},2.0"
+        with np.load(src / rel / "label.npz") as z:
+            np.savez(src / rel / "label.npz", center=z["center"], radius=z["radius"] / 3)
+    (src / "catalog.csv").write_text("\n".join(rows) + "\n")
+    s = import_presses(src, tmp_path / "rec", config=src / "sensor.yaml")
+    assert s.ball_radii_mm == (1.0, 3.0)
+    presses, _, _, warnings = load_presses(tmp_path / "rec")
+    assert len(presses) == 10 and any("several ball radii" in w for w in warnings)

@@ -621,8 +621,12 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
     scale = _resolve_scale(sessions, mm_per_px)
     balls = [float(e.ball_radius_mm) for e in entries if e.ball_radius_mm is not None]
     if balls:
-        check_scale(scale, min(balls), shape,
-                    [e.circle.r for e in entries if e.circle is not None], mm_per_px is not None)
+        # each labelled circle against its own ball, as a circle on the smallest ball (gs_sdk
+        # catalogs mix balls: a large ball's circles are not too large for the small one)
+        small = min(balls)
+        check_scale(scale, small, shape,
+                    [e.circle.r * small / e.ball_radius_mm for e in entries
+                     if e.circle is not None and e.ball_radius_mm], mm_per_px is not None)
     for e in entries:
         if e.ball_radius_mm is None:
             raise VtsError(f"press {e.id} has no ball radius (set ball_radius_mm in the "
