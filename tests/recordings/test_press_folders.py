@@ -376,3 +376,14 @@ def test_a_catalog_of_two_balls_passes_the_scale_check(sim, tmp_path) -> None:
     assert s.ball_radii_mm == (1.0, 3.0)
     presses, _, _, warnings = load_presses(tmp_path / "rec")
     assert len(presses) == 10 and any("several ball radii" in w for w in warnings)
+
+
+def test_two_folders_with_one_press_id_are_refused(sim, tmp_path) -> None:
+    import re
+    import shutil
+
+    src = gs_folder(sim, tmp_path / "calib")
+    shutil.copytree(src / "6.000mm/1", src / "6.000mm+1")  # both become the id 6.000mm-1
+    (src / "catalog.csv").write_text((src / "catalog.csv").read_text() + "6.000mm+1,6.0\n")
+    with pytest.raises(VtsError, match=re.escape("map to the press id '6.000mm-1'")):
+        import_presses(src, tmp_path / "rec")

@@ -17,6 +17,7 @@ from __future__ import annotations
 import io
 import math
 import os
+import re
 import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -181,8 +182,6 @@ def find_image(folder: Path, stem: str) -> Path | None:
 
 def _entry_id(rel: str) -> str:
     """'4.700mm/12' -> '4.700mm-12' (the manifest's id alphabet)."""
-    import re
-
     return re.sub(r"[^A-Za-z0-9._-]+", "-", rel).strip("-._") or "press"
 
 
@@ -231,10 +230,12 @@ def gs_sdk_manifest(folder: Path, home: Path, *, mm_per_px: float | None = None,
                              object="calibration_ball", ball_radius_mm=dia / 2, circle=circle,
                              meta={"experiment_reldir": rel}))
     assert size is not None
-    ids = [e.id for e in entries]
-    if len(set(ids)) != len(ids):
-        dup = next(i for i in ids if ids.count(i) > 1)
-        raise VtsError(f"two experiment folders map to the press id '{dup}'", folder / CATALOG)
+    seen: set[str] = set()
+    for e in entries:
+        if e.id in seen:
+            raise VtsError(f"two experiment folders map to the press id '{e.id}'",
+                           folder / CATALOG)
+        seen.add(e.id)
     if cfg_size is not None and cfg_size != size:
         say(f"{config} gives frames of {cfg_size[0]}x{cfg_size[1]}; the presses are "
             f"{size[0]}x{size[1]} (the presses' size is used)")
