@@ -1,6 +1,7 @@
 """`vtsbench manifest`: file-name patterns, windows, circles CSV, and the real folders."""
 
 import json
+import re
 
 import pytest
 from typer.testing import CliRunner
@@ -62,12 +63,42 @@ def test_circles_csv_attaches_by_base_name(tmp_path) -> None:
     for n in ("0000", "0001", "0002"):
         write_png(tmp_path / f"{n}.png", frame())
     csv = tmp_path / "circles.csv"
-    csv.write_text("img_names,center_x,center_y,radius\n/qt/0000.png,10,12,5\n0001.png,20,22,6\n")
+    csv.write_text("img_names,center_x,center_y,radius\n/qt/0000.png,10,12,5\n0001,20,22,6\n")
     m = build_pattern_manifest(tmp_path, ManifestOptions("{name}.png", kind="press",
                                                          ball_radius_mm=3.0, circles=csv))
     circles = {e.id: e.circle for e in m.entries}
     assert circles["0000"].r == 5 and circles["0001"].x == 20 and circles["0002"] is None
     assert all(e.ball_radius_mm == 3.0 for e in m.entries)
+
+
+def test_circles_csv_attaches_by_path_among_files_of_one_name(tmp_path) -> None:
+    """gs_sdk-style folders name every press gelsight.png: a row goes to the file whose path
+    it shares most trailing components with, and a row that fits several files alike, or two
+    rows that fit one file alike, is an error, never a guess."""
+    for k in range(3):
+        (tmp_path / f"b/{k}").mkdir(parents=True)
+        write_png(tmp_path / f"b/{k}/gelsight.png", frame())
+    opts = {"kind": "press", "ball_radius_mm": 2.0}
+    csv = tmp_path / "c.csv"
+    csv.write_text("file,x,y,r\n/home/lab/b/2/gelsight.png,2,2,2\nb/0/gelsight.png,1,1,1\n"
+                   "1/gelsight.jpg,5,5,5\n")
+    m = build_pattern_manifest(tmp_path, ManifestOptions("b/{take}/gelsight.png", circles=csv,
+                                                         **opts))
+    assert {e.source.path: e.circle.r for e in m.entries} == {
+        "b/0/gelsight.png": 1, "b/1/gelsight.png": 5, "b/2/gelsight.png": 2}
+    csv.write_text("file,x,y,r\nb/0/gelsight.png,1,1,1\n")  # the others get none
+    m = build_pattern_manifest(tmp_path, ManifestOptions("b/{take}/gelsight.png", circles=csv,
+                                                         **opts))
+    assert [e.circle is not None for e in m.entries] == [True, False, False]
+    csv.write_text("file,x,y,r\ngelsight.png,2,2,2\n")
+    with pytest.raises(VtsError, match=re.escape("row 'gelsight.png' fits b/0/gelsight.png "
+                                                 "and b/1/gelsight.png alike")):
+        build_pattern_manifest(tmp_path, ManifestOptions("b/{take}/gelsight.png", circles=csv,
+                                                         **opts))
+    csv.write_text("file,x,y,r\nx/1/gelsight.png,2,2,2\ny/1/gelsight.png,3,3,3\n")
+    with pytest.raises(VtsError, match=re.escape("both fit b/1/gelsight.png")):
+        build_pattern_manifest(tmp_path, ManifestOptions("b/{take}/gelsight.png", circles=csv,
+                                                         **opts))
 
 
 @pytest.mark.parametrize(("text", "needle"), [

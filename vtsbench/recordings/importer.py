@@ -128,16 +128,53 @@ def read_circles(path: Path) -> dict[str, Circle]:
     return out
 
 
-def _circle_for(circles: dict[str, Circle], rel: str, used: set[str]) -> Circle | None:
-    """The circle whose file name matches rel by path, base name or stem (CSV paths may differ)."""
-    base = rel.rsplit("/", 1)[-1]
-    want = {rel, base, base.rsplit(".", 1)[0]}
-    for key, circle in circles.items():
-        kbase = key.replace("\\", "/").rsplit("/", 1)[-1]
-        if {key, kbase, kbase.rsplit(".", 1)[0]} & want:
-            used.add(key)
-            return circle
-    return None
+def _parts(path: str) -> list[str]:
+    return [p for p in path.replace("\\", "/").split("/") if p not in ("", ".")]
+
+
+def _shared_tail(key: str, rel: str) -> int:
+    """How many trailing path components a CSV row's file and a matched file share: 0 when
+    their names differ (compared whole or without the extension), else 1 plus the folders
+    above that agree."""
+    kp, rp = _parts(key), _parts(rel)
+    if not kp or not rp:
+        return 0
+    kn, rn = kp[-1], rp[-1]
+    if kn != rn and kn.rsplit(".", 1)[0] != rn.rsplit(".", 1)[0]:
+        return 0
+    n = 1
+    while n < min(len(kp), len(rp)) and kp[-1 - n] == rp[-1 - n]:
+        n += 1
+    return n
+
+
+def assign_circles(circles: dict[str, Circle], rels: list[str], csv: Path | None
+                   ) -> dict[str, str]:
+    """{file: CSV row's file}: each row goes to the file whose path it shares most trailing
+    components with (a row's path may come from another machine: '/qt_images/0000.png'
+    matches '0000.png'; 'a/3/gelsight.png' matches that file among many 'gelsight.png'). A row
+    that fits several files alike, or two rows whose best file is the same, is a one-line
+    error naming them: a circle is never guessed. Files no row picks get none."""
+    by_stem: dict[str, list[str]] = {}
+    for rel in rels:
+        name = (_parts(rel) or [""])[-1]
+        by_stem.setdefault(name.rsplit(".", 1)[0], []).append(rel)
+    out: dict[str, str] = {}
+    for key in circles:
+        name = (_parts(key) or [""])[-1]
+        fits = [(_shared_tail(key, rel), rel) for rel in by_stem.get(name.rsplit(".", 1)[0], [])]
+        fits = [(d, rel) for d, rel in fits if d]
+        if not fits:
+            continue
+        top = max(d for d, _ in fits)
+        best = [rel for d, rel in fits if d == top]
+        if len(best) > 1:
+            raise VtsError(f"row '{key}' fits {best[0]} and {best[1]} alike: give the path "
+                           "relative to the folder", csv)
+        if best[0] in out:
+            raise VtsError(f"rows '{out[best[0]]}' and '{key}' both fit {best[0]}", csv)
+        out[best[0]] = key
+    return out
 
 
 def _stderr_warning(msg: str) -> None:
@@ -170,7 +207,8 @@ def build_pattern_manifest(folder: Path, opts: ManifestOptions,
     if not matches:
         raise VtsError(f"no file matches the pattern {opts.pattern!r}", folder)
     circles = read_circles(opts.circles) if opts.circles else {}
-    used: set[str] = set()
+    placed = assign_circles(circles, [r for r, _ in matches], opts.circles) if circles else {}
+    used = set(placed.values())
     from .labels_file import Marker, apply_labels, apply_values, read_labels
 
     markers = [Marker.parse(t) for t in opts.markers]
@@ -207,7 +245,7 @@ def build_pattern_manifest(folder: Path, opts: ManifestOptions,
                      meta={k: v for k, v in fields.items() if k not in LABEL_FIELDS})
         if kind == "press":
             base = replace(base, ball_radius_mm=opts.ball_radius_mm,
-                           circle=_circle_for(circles, rel, used),
+                           circle=circles[placed[rel]] if rel in placed else None,
                            source=Source(src, frame=None if pr.kind == "image" else 0))
         elif kind == "static" and pr.kind != "image":
             base = replace(base, source=Source(src, frame=0))
