@@ -258,6 +258,8 @@ def test_taxim_pack_through_the_command(tmp_path) -> None:
     res = CliRunner().invoke(app, ["import-presses", str(tmp_path / "none"), "--out",
                                    str(tmp_path / "r2")])
     assert res.exit_code == 2 and "not found" in res.stderr
+    res = CliRunner().invoke(app, ["import-presses", "/dev/null", "--out", str(tmp_path / "r3")])
+    assert res.exit_code == 2 and "not a folder or a regular file" in res.stderr
 
 
 def test_ball_radius_is_refused_for_a_gs_sdk_folder(sim, tmp_path) -> None:

@@ -277,7 +277,7 @@ def import_presses(src: str | Path, out: str | Path, *, mm_per_px: float | None 
                             sensor=sensor or "gelsight", warn=warn)
         path = save_manifest(out, m)
         layout = "gs_sdk"
-    elif src.suffix.lower() == ".npz" or src.is_file():
+    elif src.is_file():
         if config is not None:
             mm_cfg, _ = read_gs_config(Path(config))
             mm_per_px = mm_per_px if mm_per_px is not None else mm_cfg
@@ -294,7 +294,8 @@ def import_presses(src: str | Path, out: str | Path, *, mm_per_px: float | None 
         path = target
         layout = "taxim"
     else:
-        raise VtsError("not found: give a gs_sdk calibration folder (with catalog.csv) or a "
+        what = "not a folder or a regular file" if src.exists() else "not found"
+        raise VtsError(f"{what}: give a gs_sdk calibration folder (with catalog.csv) or a "
                        "Taxim data pack (.npz)", src)
     from .manifest import load_manifest
 
