@@ -69,6 +69,15 @@ def test_circles_csv_attaches_by_base_name(tmp_path) -> None:
     circles = {e.id: e.circle for e in m.entries}
     assert circles["0000"].r == 5 and circles["0001"].x == 20 and circles["0002"] is None
     assert all(e.ball_radius_mm == 3.0 for e in m.entries)
+    # names with dots: a row by stem ('a.01'), by name, or with another extension
+    (tmp_path / "dots").mkdir()
+    for n in ("a.01", "a.02", "a.03"):
+        write_png(tmp_path / "dots" / f"{n}.png", frame())
+    csv.write_text("file,x,y,r\na.01,1,1,1\na.02.png,2,2,2\nx/a.03.jpg,3,3,3\n")
+    m = build_pattern_manifest(tmp_path / "dots", ManifestOptions("{name}.png", kind="press",
+                                                                  ball_radius_mm=3.0,
+                                                                  circles=csv))
+    assert [e.circle.r for e in m.entries] == [1, 2, 3]
 
 
 def test_circles_csv_attaches_by_path_among_files_of_one_name(tmp_path) -> None:

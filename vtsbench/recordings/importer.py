@@ -132,6 +132,11 @@ def _parts(path: str) -> list[str]:
     return [p for p in path.replace("\\", "/").split("/") if p not in ("", ".")]
 
 
+def _names(name: str) -> set[str]:
+    """A file name and its stem: a row may give either ('0000', '0000.png', 'a.01.png')."""
+    return {name, name.rsplit(".", 1)[0]}
+
+
 def _shared_tail(key: str, rel: str) -> int:
     """How many trailing path components a CSV row's file and a matched file share: 0 when
     their names differ (compared whole or without the extension), else 1 plus the folders
@@ -139,8 +144,7 @@ def _shared_tail(key: str, rel: str) -> int:
     kp, rp = _parts(key), _parts(rel)
     if not kp or not rp:
         return 0
-    kn, rn = kp[-1], rp[-1]
-    if kn != rn and kn.rsplit(".", 1)[0] != rn.rsplit(".", 1)[0]:
+    if not _names(kp[-1]) & _names(rp[-1]):
         return 0
     n = 1
     while n < min(len(kp), len(rp)) and kp[-1 - n] == rp[-1 - n]:
@@ -155,15 +159,14 @@ def assign_circles(circles: dict[str, Circle], rels: list[str], csv: Path | None
     matches '0000.png'; 'a/3/gelsight.png' matches that file among many 'gelsight.png'). A row
     that fits several files alike, or two rows whose best file is the same, is a one-line
     error naming them: a circle is never guessed. Files no row picks get none."""
-    by_stem: dict[str, list[str]] = {}
+    by_name: dict[str, list[str]] = {}
     for rel in rels:
-        name = (_parts(rel) or [""])[-1]
-        by_stem.setdefault(name.rsplit(".", 1)[0], []).append(rel)
+        for n in _names((_parts(rel) or [""])[-1]):
+            by_name.setdefault(n, []).append(rel)
     out: dict[str, str] = {}
     for key in circles:
-        name = (_parts(key) or [""])[-1]
-        fits = [(_shared_tail(key, rel), rel) for rel in by_stem.get(name.rsplit(".", 1)[0], [])]
-        fits = [(d, rel) for d, rel in fits if d]
+        near = {r for n in _names((_parts(key) or [""])[-1]) for r in by_name.get(n, [])}
+        fits = [(d, rel) for rel in sorted(near) if (d := _shared_tail(key, rel))]
         if not fits:
             continue
         top = max(d for d, _ in fits)
