@@ -46,6 +46,7 @@ def test_summary_counts_each_labelled_press_and_a_miss_as_outside() -> None:
     assert s["share_centre"] == 3 / 5  # 3.0 px is within (the bound is inclusive)
     assert s["share_radius"] == 3 / 5 and s["share_both"] == 2 / 5
     assert s["centre_median_px"] == 2.0 and s["centre_max_px"] == 3.01
+    assert s["beyond_px"] == ["p"]  # the one at 3.01 px
     # label mode (labels used, nothing compared), and no labels at all: no summary
     assert circles_vs_labels([_row("label")]) is None
     assert circles_vs_labels([_row("detected", label=False, off=None)]) is None

@@ -65,7 +65,10 @@ def circles_vs_labels(rows: list[dict[str, Any]]) -> dict[str, Any] | None:
     rad = np.array([r.get("label_radius_error", np.inf) for r in compared])
     found = np.isfinite(off)
     near, close = off <= AGREE_PX, np.abs(rad) <= AGREE_RADIUS
+    far = sorted((o, r["id"]) for o, r in zip(off, compared, strict=True)
+                 if np.isfinite(o) and o > AGREE_PX)
     return {"presses": len(compared), "detected": int(found.sum()),
+            "beyond_px": [i for _o, i in far[::-1]],  # farthest first
             "centre_median_px": float(np.median(off[found])),
             "centre_max_px": float(off[found].max()),
             "radius_median": float(np.median(rad[found])),

@@ -100,7 +100,11 @@ def summary_lines(run: Any, out: Path, png: Path, method: str, seconds: float) -
             f"{agree['share_centre']:.0%} within {agree['within_px']:g} px; radius a median "
             f"{agree['radius_median']:+.1%}, {agree['share_radius']:.0%} within "
             f"{agree['within_radius']:.0%}; {agree['share_both']:.0%} within both"
-            + (f" ({missed} labelled press(es) with no circle detected)" if missed else ""))
+            + (f" ({missed} labelled press(es) with no circle detected)" if missed else "")
+            + (f"; beyond {agree['within_px']:g} px, farthest first: "
+               f"{', '.join(agree['beyond_px'][:LISTED_IDS])}"
+               f"{', ...' if len(agree['beyond_px']) > LISTED_IDS else ''}"
+               if agree["beyond_px"] else ""))
     caveat = "".join(
         f"; {len(ids)} press(es) {what} ({', '.join(ids[:LISTED_IDS])}"
         f"{', ...' if len(ids) > LISTED_IDS else ''}, see report.json)"
