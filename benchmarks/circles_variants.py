@@ -315,19 +315,20 @@ def measure(s: PressSet, rec: Path, opts: dict, seeds: tuple[int, ...] | None,
     set as recorded, to which the variant's are compared (in the set's pixels)."""
     from vtsbench.depth.calibration import load_presses
     from vtsbench.depth.centres import symmetric_centre
-    from vtsbench.depth.sphere import Rim, ball_radius_px, change_map, default_sigma
+    from vtsbench.depth.sphere import change_map, default_sigma
 
     presses, bg, setup, _ = load_presses(rec, circles="detect", **opts)
     images = {p.id: p.image for p in presses}
-    clamp = Rim().max_radius_frac * ball_radius_px(s.ball_mm, s.mm_per_px)
     dist, rad, off, label_off = [], [], [], 0
     for p in setup["presses"]:
         lab, det = p["label"], p["detected"]
         if lab is None or det is None or p["status"] == "dropped":
             continue
-        d = math.hypot(det["x"] - lab["x"], det["y"] - lab["y"])
+        # the calibration's own comparison (`calibration.label_agreement`): the centres'
+        # distance, and the radii both clamped below the ball
+        d = p["label_offset_px"]
         dist.append(d)
-        rad.append(min(det["r"], clamp) / min(lab["r"], clamp) - 1)
+        rad.append(p["label_radius_error"])
         if d > 3 and p["id"] in images:
             off.append(p["id"])
             m = change_map(images[p["id"]], bg, default_sigma(bg.shape[:2]), markers=True)
