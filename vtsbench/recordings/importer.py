@@ -80,9 +80,25 @@ def match_files(folder: Path, pattern: str) -> list[tuple[str, dict[str, str]]]:
     return found
 
 
+def safe_id(text: str, fallback: str = "entry") -> str:
+    """text in the manifest's id alphabet: each run of other characters ('/' too) becomes
+    '-', and the ends are trimmed ('4.700mm/12' -> '4.700mm-12')."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "-", text.strip("/")).strip("-._") or fallback
+
+
+def first_repeat(ids: list[str]) -> str | None:
+    """The first id that appears a second time, or None (one pass)."""
+    seen: set[str] = set()
+    for i in ids:
+        if i in seen:
+            return i
+        seen.add(i)
+    return None
+
+
 def _entry_id(rel: str) -> str:
     stem = rel.rsplit(".", 1)[0] if "." in rel.rsplit("/", 1)[-1] else rel
-    return re.sub(r"[^A-Za-z0-9._-]+", "-", stem.strip("/")).strip("-._") or "entry"
+    return safe_id(stem)
 
 
 def _labels(fields: dict[str, str], rel: str) -> Labels:
@@ -284,9 +300,8 @@ def build_pattern_manifest(folder: Path, opts: ManifestOptions,
     if unused:
         raise VtsError(f"{len(unused)} circle row(s) match no file of the pattern, first "
                        f"'{unused[0]}'", opts.circles)
-    ids = [e.id for e in entries]
-    if len(set(ids)) != len(ids):
-        dup = next(i for i in ids if ids.count(i) > 1)
+    dup = first_repeat([e.id for e in entries])
+    if dup is not None:
         raise VtsError(f"two files map to the entry id '{dup}'; add a field to the pattern")
     sessions = []
     for sid, (h, w, vfps) in session_probe.items():
@@ -328,5 +343,5 @@ def write_pattern_manifest(folder: Path, opts: ManifestOptions,
     return m, save_manifest(home, m)
 
 
-__all__ = ["ManifestOptions", "build_pattern_manifest", "compile_pattern", "match_files",
-           "media_kind", "read_circles", "write_pattern_manifest"]
+__all__ = ["ManifestOptions", "build_pattern_manifest", "compile_pattern", "first_repeat",
+           "match_files", "media_kind", "read_circles", "safe_id", "write_pattern_manifest"]

@@ -17,7 +17,6 @@ from __future__ import annotations
 import io
 import math
 import os
-import re
 import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -26,6 +25,7 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 
 from ..errors import VtsError
+from .importer import first_repeat, safe_id
 from .manifest import MANIFEST_NAME, Circle, Entry, Manifest, Session, Source, save_manifest
 from .media import probe
 
@@ -180,11 +180,6 @@ def find_image(folder: Path, stem: str) -> Path | None:
     return hits[0] if hits else None
 
 
-def _entry_id(rel: str) -> str:
-    """'4.700mm/12' -> '4.700mm-12' (the manifest's id alphabet)."""
-    return re.sub(r"[^A-Za-z0-9._-]+", "-", rel).strip("-._") or "press"
-
-
 def gs_sdk_manifest(folder: Path, home: Path, *, mm_per_px: float | None = None,
                     config: Path | None = None, sensor: str = "gelsight",
                     warn: Callable[[str], None] | None = None) -> Manifest:
@@ -226,16 +221,13 @@ def gs_sdk_manifest(folder: Path, home: Path, *, mm_per_px: float | None = None,
                            f"{size[0]}x{size[1]}", image)
         label = folder / rel / LABEL
         circle = read_label(label) if label.exists() else None
-        entries.append(Entry(_entry_id(rel), "press", "s0", Source(ref(image)),
+        entries.append(Entry(safe_id(rel, "press"), "press", "s0", Source(ref(image)),
                              object="calibration_ball", ball_radius_mm=dia / 2, circle=circle,
                              meta={"experiment_reldir": rel}))
     assert size is not None
-    seen: set[str] = set()
-    for e in entries:
-        if e.id in seen:
-            raise VtsError(f"two experiment folders map to the press id '{e.id}'",
-                           folder / CATALOG)
-        seen.add(e.id)
+    dup = first_repeat([e.id for e in entries])
+    if dup is not None:
+        raise VtsError(f"two experiment folders map to the press id '{dup}'", folder / CATALOG)
     if cfg_size is not None and cfg_size != size:
         say(f"{config} gives frames of {cfg_size[0]}x{cfg_size[1]}; the presses are "
             f"{size[0]}x{size[1]} (the presses' size is used)")
