@@ -283,15 +283,13 @@ def import_presses(src: str | Path, out: str | Path, *, mm_per_px: float | None 
                 "(2 mm ball, 0.1245 mm/px) for what is not given (--ball-radius-mm, "
                 "--mm-per-px)")
         taxim_recordings(src, out, sensor=sensor or "gelsight-taxim", **kw)
-        path = target
-        layout = "taxim"
+        from .manifest import load_manifest
+
+        m, path, layout = load_manifest(out), target, "taxim"
     else:
         what = "not a folder or a regular file" if src.exists() else "not found"
         raise VtsError(f"{what}: give a gs_sdk calibration folder (with catalog.csv) or a "
                        "Taxim data pack (.npz)", src)
-    from .manifest import load_manifest
-
-    m = load_manifest(out)
     radii = tuple(sorted({e.ball_radius_mm for e in m.entries if e.ball_radius_mm}))
     s = m.sessions[0]
     return ImportSummary(path, layout, len(m.entries), sum(e.circle is not None for e in m.entries),
