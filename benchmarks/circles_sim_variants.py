@@ -15,12 +15,15 @@ a split of 4 presses that can hide a fit's worst press), every variant the same 
 marker rows also give their RMSE over that of the same presses without markers (the same gel
 with its dots printed with no ink: the same dust, scratches, grain and camera draws).
 
+With --dots, the marker gel's print is another's (dot diameter and pitch in mm, the share of the
+light a dot's centre absorbs): small faint dots, or large dense ones.
+
 With --deep, circles only: the same ball at a coarser scale (46 px in radius) pressed to
 contacts of 0.5, 0.7, 0.85 and 0.95 of its radius (`DEEP_FRACS`), every layout, gel and frame.
 
     nice -n 15 .venv/bin/python benchmarks/circles_sim_variants.py [--presses 16] [--folds 4]
         [--lights zones3,sides4,uniform] [--method poly] [--seed 0] [--jpeg gel|none|Q|lo-hi]
-        [--colour 420|422|444] [--ramp 0.4] [--gain 1.4] [--no-restore]
+        [--colour 420|422|444] [--ramp 0.4] [--gain 1.4] [--no-restore] [--dots 0.5,1.6,0.5]
         [--deep | --deep-calibrate]
 """
 
@@ -49,14 +52,15 @@ GELS = ("none", "markers")
 def render_presses(lights: str, gel: str, shape: tuple[int, int], n: int, seed: int,
                    mm_per_px: float = MM_PER_PX, depths: list[float] | None = None,
                    jpeg: tuple[int, int] | str | None = "gel", ramp: float = 0.0,
-                   gain: float = 1.0
+                   gain: float = 1.0, dots: tuple[float, float, float] | None = None
                    ) -> tuple[np.ndarray, list[tuple[str, np.ndarray, tuple, object]]]:
     """The background and n presses (id, frame, exact circle, truth) of one layout, gel and
     frame shape; the same scenes and noise draws for every layout and gel. depths: press i
     that deep (mm) instead of a drawn depth. jpeg: the camera's JPEG quality range, None for
     none, "gel" the marker gel's own (60-90). ramp: every frame under coloured side lights
     falling off across the gel (`circles_variants.ramp_light`), 0 for none. gain: every frame
-    that much brighter before the ramp, clipped to 8 bits (bright lobes clip)."""
+    that much brighter before the ramp, clipped to 8 bits (bright lobes clip). dots: another
+    marker print (dot diameter mm, pitch mm, share of the light a dot's centre absorbs)."""
     from circles_variants import ramp_light
 
     from vtsbench.sim.appearance import background, sensor_appearance
@@ -66,6 +70,9 @@ def render_presses(lights: str, gel: str, shape: tuple[int, int], n: int, seed: 
     from vtsbench.sim.scene import render
 
     app = sensor_appearance("markers")
+    if dots is not None:
+        app = dataclasses.replace(app, marker_diameter_mm=dots[0], marker_pitch_mm=dots[1],
+                                  marker_darkness=dots[2])
     if jpeg != "gel":
         app = dataclasses.replace(app, jpeg_quality=jpeg)
     if gel == "none":  # the same gel, its dots printed with no ink: the same draws of its
@@ -130,6 +137,14 @@ def circle_errors(record: list[dict]) -> dict:
             "centre_med": float(np.median(d)), "centre_max": float(d.max()),
             "radius_med": float(np.median(r)), "radius_max": float(r.max()),
             "good": float(((d <= 3) & (r <= 0.1)).sum() / len(record))}
+
+
+def dots_arg(text: str) -> tuple[float, float, float]:
+    """--dots: "diameter,pitch,darkness" (mm, mm, 0-1)."""
+    d, p, k = (float(v) for v in text.split(","))
+    if not (0 < d < p and 0 < k <= 1):
+        raise argparse.ArgumentTypeError("want 0 < diameter < pitch and 0 < darkness <= 1")
+    return d, p, k
 
 
 def jpeg_arg(text: str) -> tuple[int, int] | str | None:
@@ -298,6 +313,9 @@ def main() -> None:
     ap.add_argument("--no-restore", action="store_true",
                     help="the change map without a clipped channel restored "
                          "(imprint.restore_clipped), for comparison")
+    ap.add_argument("--dots", type=dots_arg, default=None,
+                    help="another marker print: dot diameter mm, pitch mm, darkness (the share "
+                         "of the light a dot's centre absorbs), e.g. 0.5,1.6,0.5")
     ap.add_argument("--deep-calibrate", action="store_true",
                     help="calibrate end to end on the --deep presses: used, dropped, circles "
                          "and held-out RMSE")
@@ -320,7 +338,9 @@ def main() -> None:
         f"each held out once in {args.folds} folds"
     print(f"{args.presses} simulated presses of a 3 mm ball a variant at {MM_PER_PX} mm/px, "
           f"{held}, {args.method}, seed {args.seed}, JPEG {args.jpeg} colour {args.colour}, "
-          f"{light_note(args.ramp, args.gain, not args.no_restore)}\n")
+          f"{light_note(args.ramp, args.gain, not args.no_restore)}"
+          + ("" if args.dots is None else ", dots {} mm every {} mm absorbing {}".format(
+              *args.dots)) + "\n")
     print("| lights | gel | frame | used | dropped | centre error px, median / max | radius "
           "error, median / max | within 3 px and 10 % | markers found | held-out RMSE mm, "
           "exact circles | detected | ratio | x without markers (exact / detected) | time |")
@@ -334,7 +354,7 @@ def main() -> None:
                     t0 = time.perf_counter()
                     bg, presses = render_presses(lights, gel, shape, args.presses, args.seed,
                                                  jpeg=args.jpeg, ramp=args.ramp,
-                                                 gain=args.gain)
+                                                 gain=args.gain, dots=args.dots)
                     r = measure(Path(tmp), f"{lights}-{frame}-{gel}", bg, presses, held_n,
                                 args.method, args.folds)
                     vs = "-" if plain is None else (f"{r['label'] / plain['label']:.2f} / "

@@ -484,3 +484,27 @@ def test_large_dots_under_jpeg_get_their_own_blur_and_it_pays(folders, tmp_path,
     without, px0 = held()
     assert px0 == 0.0
     assert with_blur < 0.97 * without
+
+
+@pytest.mark.parametrize("dot_mm, pitch_mm, dark", [(0.5, 1.6, 0.5), (0.35, 1.0, 0.6),
+                                                    (1.33, 2.72, 0.82), (1.6, 2.4, 0.9)])
+def test_other_prints_are_found_at_their_size(dot_mm, pitch_mm, dark) -> None:
+    """The simulator's marker gel printed otherwise (small and faint, tiny and dense, the real
+    grid's size and darkness, large and dense: `circles_sim_variants.py --dots`): the grid is
+    found in the background through its camera and JPEG, its dots about their printed size,
+    nearly every dot of the frame counted."""
+    import dataclasses
+
+    from vtsbench.sim.appearance import background, sensor_appearance
+    from vtsbench.sim.optics import Capture, sensor
+
+    mm, shape = 0.05, (240, 320)
+    app = dataclasses.replace(sensor_appearance("markers"), marker_diameter_mm=dot_mm,
+                              marker_pitch_mm=pitch_mm, marker_darkness=dark)
+    bg = background(app, sensor(*shape, mm, lights="zones3"), Capture(gel=0),
+                    np.random.default_rng([0, 1]))
+    spec = detect_markers(bg, mm)
+    assert spec is not None
+    assert spec.diameter_px == pytest.approx(dot_mm / mm, rel=0.25)
+    whole = (shape[0] * mm // pitch_mm) * (shape[1] * mm // pitch_mm)  # dots wholly inside
+    assert spec.n_dots >= 0.8 * whole
