@@ -32,7 +32,8 @@ def sim(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def gs_folder(sim: Path, dst: Path, *, labels: bool = True, skip_label: int | None = None
               ) -> Path:
-    """The simulated presses laid out as gs_sdk's calibration scripts write them."""
+    """The simulated presses laid out as gs_sdk's calibration scripts write them (with the
+    labelling tool's `labeled.png` beside each labelled press)."""
     m = load_manifest(sim)
     dst.mkdir(parents=True)
     write_png(dst / "background.png", read_image(sim / m.sessions[0].background))
@@ -40,10 +41,15 @@ def gs_folder(sim: Path, dst: Path, *, labels: bool = True, skip_label: int | No
     for k, e in enumerate(e for e in m.entries if e.kind == "press"):
         rel = f"{2 * e.ball_radius_mm:.3f}mm/{k}"
         (dst / rel).mkdir(parents=True)
-        write_png(dst / rel / "gelsight.png", read_image(sim / e.source.path))
+        frame = read_image(sim / e.source.path)
+        write_png(dst / rel / "gelsight.png", frame)
         if labels and k != skip_label:
             np.savez(dst / rel / "label.npz", center=[e.circle.x, e.circle.y],
                      radius=e.circle.r)
+            # gs_sdk's labelling tool also saves the press with its circle drawn over it
+            drawn = frame.copy()
+            drawn[int(e.circle.y), :] = 255
+            write_png(dst / rel / "labeled.png", drawn)
         rows.append(f"{rel},{2 * e.ball_radius_mm}")
     (dst / "catalog.csv").write_text("\n".join(rows) + "\n")
     (dst / "sensor.yaml").write_text(f"device_name: GelSight Mini\nimgh: 120\nimgw: 160\n"
