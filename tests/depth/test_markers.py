@@ -489,8 +489,8 @@ def test_large_dots_under_jpeg_get_their_own_blur_and_it_pays(folders, tmp_path,
 @pytest.mark.parametrize("dot_mm, pitch_mm, dark", [(0.5, 1.6, 0.5), (0.35, 1.0, 0.6),
                                                     (1.33, 2.72, 0.82), (1.6, 2.4, 0.9)])
 def test_other_prints_are_found_at_their_size(dot_mm, pitch_mm, dark) -> None:
-    """The simulator's marker gel printed otherwise (small and faint, tiny and dense, the real
-    grid's size and darkness, large and dense: `circles_sim_variants.py --dots`): the grid is
+    """The simulator's marker gel printed otherwise (small and faint, tiny and dense, dark,
+    large and dense: `circles_sim_variants.py --dots`): the grid is
     found in the background through its camera and JPEG, its dots about their printed size,
     nearly every dot of the frame counted."""
     import dataclasses
