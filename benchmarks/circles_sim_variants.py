@@ -16,7 +16,10 @@ marker rows also give their RMSE over that of the same presses without markers (
 with its dots printed with no ink: the same dust, scratches, grain and camera draws).
 
 With --dots, the marker gel's print is another's (dot diameter and pitch in mm, the share of the
-light a dot's centre absorbs): small faint dots, or large dense ones.
+light a dot's centre absorbs): small faint dots, or large dense ones. The share is the
+simulator's nominal darkness: measured as calibration measures a gel (`markers.background_dots`),
+the default print's 75 % passes a median 0.30 of the light within its grown dots, and the real
+marker gels of ../shared/data/real 0.48-0.69 (docs/depth.md, other marker prints).
 
 With --deep, circles only: the same ball at a coarser scale (46 px in radius) pressed to
 contacts of 0.5, 0.7, 0.85 and 0.95 of its radius (`DEEP_FRACS`), every layout, gel and frame.
