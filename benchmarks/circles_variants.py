@@ -18,7 +18,8 @@ span more pixels: the grid moved, at 2x, and at 2.5x rotated then JPEG-compresse
 frame of about 400x300 with contacts of about 42 px); the frame cut by an eighth of each side
 (contacts near the edge cut by the border), and coloured side lights that fall off across the
 gel (each channel's light a ramp of 1 -/+ RAMP along its own direction, so that bright lobes
-clip at 255). Any variants joined by "-" are applied in turn (`--variants x1.25-mirror-noise`).
+clip at 255), and a monochrome camera (every channel the grey level). Any variants joined by
+"-" are applied in turn (`--variants x1.25-mirror-noise`).
 Per set and variant, one row: presses used and dropped (`calibrate --circles detect`), the detected
 circles against the labels (centre distance, median and share within 3 px of the variant's pixels,
 and in the set's own pixels; radius error after the 0.97 R clamp both get, median and share within
@@ -56,7 +57,7 @@ from circles_real import REAL, held_out_rmse
 VARIANTS = ("base", "rot90", "mirror", "x0.5", "x1.5", "x2", "jpeg75", "markers", "swap", "dim",
             "rot90-markers-jpeg75", "moved", "rot90-moved-jpeg75", "noise", "blur", "vignette",
             "balance", "exposure", "x2-moved", "x2.5-rot90-moved-jpeg75", "crop", "ramp",
-            "crop-ramp", "crop-rot90-ramp-jpeg75")
+            "crop-ramp", "crop-rot90-ramp-jpeg75", "grey")
 #: Other cameras: noise (DN, per pixel and channel), defocus (Gaussian sigma, px), corners
 #: darkened to this share of the centre's light; a white balance (R, G, B gains) and an auto
 #: exposure that makes the presses brighter than the background by this factor.
@@ -196,6 +197,9 @@ def variant(s: PressSet, how: str, layer: np.ndarray | None) -> PressSet | None:
             return cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
 
         return s.map(jpeg, _same)
+    if how == "grey":  # a monochrome camera: every channel the frame's grey level
+        return s.map(lambda a: np.ascontiguousarray(np.repeat(
+            cv2.cvtColor(a, cv2.COLOR_BGR2GRAY)[..., None], 3, axis=-1)), _same)
     if how == "swap":  # the colour channels in the other order (RGB read as BGR)
         return s.map(lambda a: np.ascontiguousarray(a[..., ::-1]), _same)
     if how == "dim":  # a darker exposure: 0.6 times the light, then an 8-bit camera's gamma
