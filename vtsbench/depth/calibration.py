@@ -571,19 +571,20 @@ def _retry_detection(img: np.ndarray, bg: np.ndarray, ball_px: float,
     from .imprint import ring_contrast
     from .sphere import RING_Z_MIN, SUPPORT_LOW, change_map, change_support, default_sigma
 
-    sup = change_support(img, bg)
+    m = change_map(img, bg, default_sigma(img.shape[:2]), markers=True)  # built once, used 4x
+    sup = change_support(img, bg, m=m)
     if sup is None:
         return None
     found = detect_circle(img, bg, start=(sup[0], sup[1], 0.8 * sup[2]), ball_px=ball_px)
-    if found is not None and not circle_doubts(found, img, bg, ball_px):
+    if found is not None and not circle_doubts(found, img, bg, ball_px, m):
         return found
     if first[2] >= SUPPORT_LOW * sup[2]:
         return None
     # a small strong feature inside a faint imprint (a monochrome camera: one dark crescent
     # of the contact stands out of its ring) won the first detection
     found = detect_circle(img, bg, ball_px=ball_px, min_radius_px=SUPPORT_LOW * sup[2])
-    if found is None or circle_doubts(found, img, bg, ball_px) or ring_contrast(
-            change_map(img, bg, default_sigma(img.shape[:2]), markers=True), found) < RING_Z_MIN:
+    if found is None or circle_doubts(found, img, bg, ball_px, m) or ring_contrast(
+            m, found) < RING_Z_MIN:
         # and only a circle whose rim stands out (DIGIT 0008 cut by the border, moved markers
         # and JPEG: a circle 12 px off its contact passed the check with a rim contrast of 2.3;
         # Taxim's press-002 in grey, found, 11.7)

@@ -707,21 +707,24 @@ def _hull_of_largest(mask: np.ndarray) -> np.ndarray:
     return out.astype(bool)
 
 
-def change_support(image: np.ndarray, background: np.ndarray, sigma: float | None = None
-                   ) -> tuple[float, float, float] | None:
+def change_support(image: np.ndarray, background: np.ndarray, sigma: float | None = None,
+                   m: np.ndarray | None = None) -> tuple[float, float, float] | None:
     """The imprint as the colour change shows it: (x, y, r) of the largest region whose change
-    stands above the noise (r: the radius of a disc of its area), or None if there is none."""
-    sigma = default_sigma(image.shape[:2]) if sigma is None else sigma
-    m = change_map(image, background, sigma, markers=True)
+    stands above the noise (r: the radius of a disc of its area), or None if there is none.
+    m: the change map at sigma when the caller has it (markers taken out)."""
+    if m is None:
+        sigma = default_sigma(image.shape[:2]) if sigma is None else sigma
+        m = change_map(image, background, sigma, markers=True)
     return _largest_change(m, _change_threshold(m)[1])
 
 
 def circle_doubts(circle: tuple[float, float, float], image: np.ndarray, background: np.ndarray,
-                  ball_px: float) -> list[str]:
+                  ball_px: float, m: np.ndarray | None = None) -> list[str]:
     """Why a contact circle (x, y, r px) is implausible for this press, or [] when it is not:
     larger than the ball, a radius far from what the colour change supports, a disc that
     mostly shows no change (centre off the imprint), a centre off the image, a stronger change
-    elsewhere (`_stronger_outside`)."""
+    elsewhere (`_stronger_outside`). m: the press's change map when the caller has it
+    (`change_map` at `default_sigma`, markers taken out), so it is not built again."""
     x, y, r = circle
     h, w = image.shape[:2]
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(r)) or r <= 0:
@@ -731,7 +734,8 @@ def circle_doubts(circle: tuple[float, float, float], image: np.ndarray, backgro
         out.append(f"centre ({x:.1f}, {y:.1f}) lies outside the {h}x{w} image")
     if r > 1.3 * ball_px:
         out.append(f"radius {r:.1f} px is larger than the ball ({ball_px:.1f} px)")
-    m = change_map(image, background, default_sigma((h, w)), markers=True)
+    if m is None:
+        m = change_map(image, background, default_sigma((h, w)), markers=True)
     _, loose = _change_threshold(m)
     sup = _largest_change(m, loose)  # what change_support gives, from the same map
     if sup is None:
