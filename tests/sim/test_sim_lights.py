@@ -117,3 +117,55 @@ def test_a_press_is_found_under_each_layout(lights, gel, size) -> None:
     assert found is not None
     x, y, fr = found
     assert math.hypot(x - centre[0], y - centre[1]) < 1.5 and abs(fr / r - 1) < 0.06, (found, r)
+
+
+@pytest.mark.parametrize("lights", ["sides4", "uniform"])
+def test_a_simulated_folder_is_shot_through_its_light_layout(tmp_path, lights) -> None:
+    """`simulate(..., lights=)`: each press frame is its exact truth shot through that layout
+    (the same draws as the default's render), the sensor is named for the layout, and the
+    geometry is the default layout's."""
+    from vtsbench.recordings.manifest import load_manifest
+    from vtsbench.recordings.media import read_image
+    from vtsbench.recordings.truth import read_truth
+    from vtsbench.sim.plan import entry_rng
+    from vtsbench.sim.simulate import simulate
+
+    kw = {"seed": 5, "n_static": 0, "n_sequences": 0, "n_presses": 2, "size": SIZE,
+          "mm_per_px": MPP, "n_sessions": 1, "gel": "markers"}
+    simulate(tmp_path / "lit", lights=lights, **kw)
+    simulate(tmp_path / "default", **kw)
+    m, d = load_manifest(tmp_path / "lit"), load_manifest(tmp_path / "default")
+    assert [s.sensor for s in m.sessions] == [f"vtsbench-sim-{lights}"]
+    assert d.sessions[0].sensor == "vtsbench-sim" and m.sessions[0].notes.endswith(lights)
+    fields, app = sensor(*SIZE, MPP, lights=lights), sensor_appearance("markers")
+    cap = Capture(read_noise=float(m.sessions[0].notes.split("read noise ")[1].split(" DN")[0]),
+                  gel=5)
+    for e, e0 in zip(m.entries, d.entries, strict=True):
+        truth = read_truth(tmp_path / "lit" / e.truth)
+        assert np.array_equal(truth.depth_mm, read_truth(tmp_path / "default" / e0.truth).depth_mm)
+        rng = entry_rng(5, "press", int(e.id.split("-")[1]))
+        press_scene(rng, SIZE, MPP, 2, app)  # the draws the scene takes before its frame
+        want = relight(truth.grad, fields, cap, rng, app)[0]
+        frame = read_image(tmp_path / "lit" / e.source.path)
+        assert np.array_equal(frame, want)
+        assert not np.array_equal(frame, read_image(tmp_path / "default" / e0.source.path))
+
+
+def test_the_command_line_offers_every_layout(tmp_path) -> None:
+    """`vtsbench simulate --lights` lists exactly the layouts of `optics.LIGHTS`, and writes one."""
+    import typing
+
+    from typer.testing import CliRunner
+
+    from vtsbench.cli import app
+    from vtsbench.cli.recordings import simulate as command
+    from vtsbench.recordings.manifest import load_manifest
+
+    hint = typing.get_type_hints(command, include_extras=True)["lights"]
+    assert set(typing.get_args(typing.get_args(hint)[0])) == set(LIGHTS)
+    out = tmp_path / "rec"
+    r = CliRunner().invoke(app, ["simulate", str(out), "--lights", "sides4", "--static", "0",
+                                 "--sequences", "0", "--presses", "1", "--size", "96x128",
+                                 "--sessions", "1", "--quiet"])
+    assert r.exit_code == 0, r.output
+    assert load_manifest(out).sessions[0].sensor == "vtsbench-sim-sides4"

@@ -53,6 +53,11 @@ def simulate(
     gel: Annotated[Literal["markers", "plain"] | None, choice(
         help="Generator 2: the sensor's gel, 'markers' (a printed marker grid) or 'plain' "
              "(default); every session of the folder wears it.")] = None,
+    lights: Annotated[Literal["zones3", "sides4", "uniform"], choice(
+        help="The sensor's light layout: 'zones3' (default), three coloured LED zones round the "
+             "gel (GelSight-type); 'sides4', red, green, blue and white strips on four sides, "
+             "lower over the gel; 'uniform', diffuse white light from above (a uniformly lit "
+             "sensor: a press changes the colour little, and in grey).")] = "zones3",
 ) -> None:
     """Write a synthetic recordings folder with exact ground-truth depth and gradients.
 
@@ -63,7 +68,7 @@ def simulate(
     m = run(run_sim, out, seed=seed, n_static=static, n_sequences=sequences, n_presses=presses,
             n_objects=objects, size=parse_size(size), frames=frames, n_sessions=sessions,
             mm_per_px=mm_per_px, workers=workers, overwrite=overwrite, progress=not quiet,
-            generator=generator, gel=gel)
+            generator=generator, gel=gel, lights=lights)
     typer.echo(f"wrote {len(m.entries)} entries in {len(m.sessions)} sessions to {out}")
 
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from . import gel
 from .objects import ObjectInstance
-from .optics import Capture, capture_frame, sensor
+from .optics import DEFAULT_LIGHTS, Capture, capture_frame, sensor
 
 if TYPE_CHECKING:
     from .appearance import Appearance
@@ -64,6 +64,8 @@ class Scene:
     appearance: Appearance | None = None
     #: Generator 2: rotation, gel shear and stick region per frame (None: a rigid shift).
     path: ContactPath | None = None
+    #: The sensor's light layout (a name of `optics.LIGHTS`).
+    lights: str = DEFAULT_LIGHTS
 
     def __post_init__(self) -> None:
         """Refuse inconsistent scenes: one centre and depth per frame, motion declared."""
@@ -271,7 +273,8 @@ def render(scene: Scene, capture: Capture | None = None,
         raise ValueError("a scene with noise needs an rng")
     h_px, w_px = scene.size
     t_n = scene.n_frames
-    fields = sensor(h_px, w_px, scene.mm_per_px, eff.vignetting, eff.nonuniform_light)
+    fields = sensor(h_px, w_px, scene.mm_per_px, eff.vignetting, eff.nonuniform_light,
+                    scene.lights)
     frames = np.empty((t_n, h_px, w_px, 3), np.uint8)
     depth = np.zeros((t_n, h_px, w_px), np.float32)
     grad = np.zeros((t_n, h_px, w_px, 2), np.float32)

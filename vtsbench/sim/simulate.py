@@ -19,7 +19,7 @@ import numpy as np
 from ..errors import VtsError
 from ..recordings.manifest import Circle, Entry, Labels, Manifest, Mount, Session, Source
 from .objects import BALL_RADIUS_MM, OBJECTS
-from .optics import Capture
+from .optics import DEFAULT_LIGHTS, LIGHTS, Capture
 from .plan import (
     DEFAULT_GENERATOR,
     GENERATORS,
@@ -43,6 +43,12 @@ FPS = 30.0
 READ_NOISE_DN = (1.0, 2.0)
 
 
+def sensor_id(lights: str = DEFAULT_LIGHTS) -> str:
+    """The simulated sensor's id: one per light layout, so that a calibration made under one
+    layout is refused for frames of another (`load_calibration(..., sensor=)`)."""
+    return SENSOR_ID if lights == DEFAULT_LIGHTS else f"{SENSOR_ID}-{lights}"
+
+
 @dataclass(frozen=True)
 class Job:
     """Everything a worker needs to render and write one entry."""
@@ -58,6 +64,8 @@ class Job:
     generator: int = 1
     #: Generator 2: the folder's sensor (its gel and imprint gain), shared by every entry.
     appearance: Appearance | None = None
+    #: The sensor's light layout (a name of `optics.LIGHTS`).
+    lights: str = DEFAULT_LIGHTS
 
 
 def session_capture(seed: int, session: int) -> tuple[Capture, np.random.Generator]:
@@ -117,6 +125,8 @@ def run_job(job: Job) -> Entry:
                                             job.appearance)
     else:
         scene = press_scene(rng, job.size, job.mm_per_px, gen, job.appearance)
+    if job.lights != DEFAULT_LIGHTS:
+        scene = dataclasses.replace(scene, lights=job.lights)
     rendered = render(scene, job.capture, rng)
     truth = f"truth/{plan.id}.npz"
     write_truth(root / truth, Truth(rendered.depth_mm, rendered.grad, rendered.contact,
@@ -245,7 +255,8 @@ def simulate(out: str | Path, *, seed: int = 0, n_static: int = 30, n_sequences:
              n_presses: int = 20, n_objects: int = 15, size: tuple[int, int] = (480, 640),
              frames: int = 8, n_sessions: int = 3, mm_per_px: float = 0.03, workers: int = 1,
              overwrite: bool = False, progress: bool = False,
-             generator: int = DEFAULT_GENERATOR, gel: str | None = None) -> Manifest:
+             generator: int = DEFAULT_GENERATOR, gel: str | None = None,
+             lights: str = DEFAULT_LIGHTS) -> Manifest:
     """Write a synthetic recordings folder with exact ground truth; returns its manifest.
 
     generator 1 is the first simulator (rigid shifts at constant speed, clean sensor), kept
@@ -253,7 +264,9 @@ def simulate(out: str | Path, *, seed: int = 0, n_static: int = 30, n_sequences:
     fixed pattern and a real camera (docs/simulator.md). A generator-2 folder is one sensor:
     every session wears the same gel (`gel`: 'markers' or 'plain', default DEFAULT_GEL) with
     one pattern and imprint gain drawn from the seed, so that the calibration presses and the
-    entries share them.
+    entries share them. lights: the sensor's light layout (`optics.LIGHTS`: 'zones3', three
+    coloured zones, the default; 'sides4', red, green, blue and white strips on four sides;
+    'uniform', diffuse white light, as on a marker-less uniformly lit sensor).
     """
     from ..atomic import staged_dir
     from ..recordings.manifest import save_manifest
@@ -273,12 +286,14 @@ def simulate(out: str | Path, *, seed: int = 0, n_static: int = 30, n_sequences:
         raise VtsError(f"--gel must be one of {', '.join(GELS)}, got {gel!r}")
     if gel is not None and generator < 2:
         raise VtsError("--gel needs --generator 2 (generator 1 has a clean gel)")
+    if lights not in LIGHTS:
+        raise VtsError(f"--lights must be one of {', '.join(LIGHTS)}, got {lights!r}")
     app = sensor_appearance(gel or DEFAULT_GEL) if generator >= 2 else None
     plans = make_plans(seed, n_static, n_sequences, n_presses, n_objects, n_sessions,
                        per_state=generator >= 2)
     with staged_dir(out, overwrite, marker="recordings.json") as stage:
         sessions, captures = [], []
-        fields = sensor(size[0], size[1], mm_per_px)
+        fields = sensor(size[0], size[1], mm_per_px, lights=lights)
         for s in range(n_sessions):
             sid = f"s{s:02d}"
             capture, rng = session_capture(seed, s)
@@ -297,20 +312,23 @@ def simulate(out: str | Path, *, seed: int = 0, n_static: int = 30, n_sequences:
             if generator >= 2:  # generator 1 folders carry no mark (their bytes are kept)
                 notes = (f"simulated, generator {generator}; {gel or DEFAULT_GEL} gel, imprint "
                          f"gain {gel_gain(app, seed):.3f}; read noise {capture.read_noise:g} DN")
-            sessions.append(Session(sid, SENSOR_ID, size, (mm_per_px, mm_per_px), FPS,
+            if lights != DEFAULT_LIGHTS:  # the default's notes stay as they were
+                notes += f"; lights {lights}"
+            sessions.append(Session(sid, sensor_id(lights), size, (mm_per_px, mm_per_px), FPS,
                                     f"{sid}/background.png", mount=Mount(), notes=notes))
         for sub, n in (("static", n_static), ("sequences", n_sequences), ("presses", n_presses),
                        ("truth", len(plans))):
             if n:
                 (stage / sub).mkdir()
         jobs = [Job(p, sessions[p.session].id, captures[p.session], seed, size, mm_per_px,
-                    frames, str(stage), generator, app) for p in plans]
+                    frames, str(stage), generator, app, lights) for p in plans]
         entries = _run_jobs(jobs, workers, progress)
         used = ", ".join(c.name for c in OBJECTS[:n_objects])
         manifest = Manifest(
             sessions=sessions, entries=entries, name="vtsbench-sim",
             description=("Synthetic visuo-tactile recordings ("
                          + (f"generator {generator}, " if generator >= 2 else "")
+                         + (f"lights {lights}, " if lights != DEFAULT_LIGHTS else "")
                          + f"seed {seed}, {size[0]}x{size[1]} "
                          f"px at {mm_per_px:g} mm/px) with exact ground-truth depth in truth/. "
                          f"Objects: {used}."),
