@@ -543,8 +543,9 @@ def _resolve_background(root: Path, sessions: list[Any], frames: list[np.ndarray
         if len(frames) < 3:
             raise VtsError(f"--estimate-background needs at least 3 press frames, got "
                            f"{len(frames)}")
-        bg = np.median(np.stack(frames), axis=0).round().astype(np.uint8)
-        how = f"median of {len(frames)} press frames"
+        from .background import press_median
+
+        bg, how = press_median(frames), f"median of {len(frames)} press frames"
     else:
         have = [s for s in sessions if s.background]
         if not have:
@@ -560,6 +561,21 @@ def _resolve_background(root: Path, sessions: list[Any], frames: list[np.ndarray
         raise VtsError(f"background is {bg.shape[0]}x{bg.shape[1]} but the presses are "
                        f"{shape[0]}x{shape[1]}", background)
     return bg, how
+
+
+def _crowded_warning(shape: tuple[int, int], presses: list[Press], n_frames: int) -> list[str]:
+    """A warning when half or more of the presses the background was estimated from touch one
+    spot: the median there is a press (`background.crowded`)."""
+    from .background import crowded
+
+    spot = crowded(shape, [(p.x, p.y, p.r) for p in presses], n_frames)
+    if spot is None:
+        return []
+    n, (x, y) = spot
+    return [f"the background was estimated from the presses, but {n} of {n_frames} touch "
+            f"({x}, {y}) px: the median there is a press, so their colour change is measured "
+            "against a press and the mapping learns from it; record a no-contact frame and pass "
+            "--background FILE, or spread the presses so that fewer than half touch any spot"]
 
 
 def _retry_detection(img: np.ndarray, bg: np.ndarray, ball_px: float,
@@ -707,6 +723,8 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
             warnings.append(f"press {e.id}: labelled circle doubted ({'; '.join(doubts)}); "
                             "used as labelled")
         record.append(row)
+    if estimate_background:
+        warnings.extend(_crowded_warning(shape, presses, len(frames)))
     radii = sorted({p.ball_radius_mm for p in presses})
     setup = {"root": root, "sensor": sensors[0], "shape": shape, "mm_per_px": scale,
              "background": bg_how, "lost": lost, "n_entries": len(entries), "presses": record,
