@@ -1,5 +1,6 @@
-"""A background estimated from the presses: said to be untrustworthy where half or more of them
-touch one spot (the median there is a press), and quiet where they are spread."""
+"""The background: one estimated from the presses is said to be untrustworthy where half or more
+of them touch one spot (the median there is a press), and quiet where they are spread; a given
+one that shows a contact the presses do not (a press frame) is named."""
 
 from __future__ import annotations
 
@@ -22,12 +23,12 @@ from vtsbench.recordings.manifest import (
     save_manifest,
 )
 from vtsbench.recordings.media import write_png
-from vtsbench.sim.appearance import sensor_appearance
-from vtsbench.sim.optics import Capture
+from vtsbench.sim.appearance import background, sensor_appearance
+from vtsbench.sim.optics import Capture, sensor
 from vtsbench.sim.plan import press_scene
 from vtsbench.sim.scene import render
 
-SIZE, MPP = (120, 160), 0.1
+SIZE, MPP = (240, 320), 0.05
 
 
 def test_crowded_finds_where_half_the_circles_overlap() -> None:
@@ -52,7 +53,7 @@ def test_press_median_is_the_per_pixel_median() -> None:
 
 def _presses(folder: Path, spread_px: float, n: int = 8) -> Path:
     """n simulated presses of the 3 mm ball, centred within spread_px of the frame's centre,
-    with their exact circles and no background."""
+    with their exact circles; the no-contact frame as bg.png, not in the manifest."""
     app = sensor_appearance("plain")
     rng = np.random.default_rng(1)
     (folder / "p").mkdir(parents=True)
@@ -67,13 +68,15 @@ def _presses(folder: Path, spread_px: float, n: int = 8) -> Path:
         r = math.sqrt(float(shot.contact[0].sum()) / math.pi)
         entries.append(Entry(f"p{i}", "press", "s0", Source(f"p/{i}.png"), ball_radius_mm=3.0,
                              circle=Circle(cx, cy, r)))
+    write_png(folder / "bg.png", background(app, sensor(*SIZE, MPP), Capture(gel=1),
+                                            np.random.default_rng(99)))
     save_manifest(folder, Manifest(sessions=[Session("s0", "sim", SIZE, (MPP, MPP), 30.0, None,
                                                      mount=Mount())],
                                    entries=entries, name="p", description="p", created_by="t"))
     return folder
 
 
-@pytest.mark.parametrize("spread_px, said", [(8.0, True), (60.0, False)])
+@pytest.mark.parametrize("spread_px, said", [(8.0, True), (120.0, False)])
 def test_calibration_says_when_the_presses_crowd_the_estimated_background(
         tmp_path, spread_px, said) -> None:
     rec = _presses(tmp_path / "rec", spread_px)
@@ -82,3 +85,30 @@ def test_calibration_says_when_the_presses_crowd_the_estimated_background(
     assert bool(hit) == said, warns
     if said:
         assert "of 8 touch" in hit[0] and "--background FILE" in hit[0]
+
+
+def _own(warns: list[str]) -> list[str]:
+    return [w for w in warns if "shows a contact of its own" in w]
+
+
+def test_a_press_frame_given_as_the_background_is_named(tmp_path) -> None:
+    """A press frame as the background: its contact is named where it lies; the true
+    background is quiet."""
+    rec = _presses(tmp_path / "rec", 120.0)
+    _, _, setup, warns = load_presses(rec, background=rec / "bg.png")
+    assert not _own(warns), warns
+    _, _, _, warns = load_presses(rec, background=rec / "p" / "0.png")
+    hit = _own(warns)
+    assert len(hit) == 1, warns
+    c = next(p["label"] for p in setup["presses"] if p["id"] == "p0")
+    x, y = (float(v) for v in hit[0].split(" at (")[1].split(")")[0].split(", "))
+    assert math.hypot(x - c["x"], y - c["y"]) < 3, hit
+
+
+def test_the_true_background_is_quiet_where_every_press_touches(tmp_path) -> None:
+    """Every press within 8 px of the centre: their median is a press there and the true
+    background differs from it by a contact, but the presses differ from it too (each in its
+    own place and depth), so the background is not taken for a press frame."""
+    rec = _presses(tmp_path / "rec", 8.0)
+    _, _, _, warns = load_presses(rec, background=rec / "bg.png")
+    assert not _own(warns), warns

@@ -24,6 +24,7 @@ from vtsbench.depth.calibration import (
     SCHEMA_PATH,
     calibrate,
     load_calibration,
+    load_presses,
     metadata_errors,
     save_calibration,
 )
@@ -334,6 +335,20 @@ def test_taxim_gelsight_presses(tmp_path) -> None:
     assert mean["plane_aligned_rmse_mm"] < 0.12
     assert mean["gradient_rmse"] < 0.35
     assert all(r.reference == "sphere" for r in run.held_out)
+    assert not [w for w in run.warnings if "of its own" in w]  # its background is one
+
+
+@pytest.mark.real
+def test_a_real_press_given_as_the_background_is_named(tmp_path) -> None:
+    """Taxim's press 010 passed as the background: its contact is named, where it lies."""
+    npz = real_dir("taxim_gelsight_ball") / TAXIM.split("/")[1]
+    folder = taxim_recordings(npz, tmp_path / "taxim")
+    _, _, setup, warns = load_presses(folder, background=folder / "presses" / "press-010.png")
+    hit = [w for w in warns if "shows a contact of its own" in w]
+    assert len(hit) == 1 and "is it a press frame?" in hit[0]
+    label = next(p["label"] for p in setup["presses"] if p["id"] == "press-010")
+    x, y = (float(v) for v in hit[0].split(" at (")[1].split(")")[0].split(", "))
+    assert abs(x - label["x"]) < 4 and abs(y - label["y"]) < 4
 
 
 @pytest.mark.real

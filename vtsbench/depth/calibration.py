@@ -563,6 +563,21 @@ def _resolve_background(root: Path, sessions: list[Any], frames: list[np.ndarray
     return bg, how
 
 
+def _own_contact_warning(bg: np.ndarray, how: str, frames: list[np.ndarray],
+                         ball_px: float) -> list[str]:
+    """A warning when the background shows a contact the presses do not
+    (`background.own_contact`: a press frame given as the background)."""
+    from .background import own_contact
+
+    c = own_contact(bg, frames, ball_px)
+    if c is None:
+        return []
+    return [f"the background ({how}) shows a contact of its own at ({c[0]:.0f}, {c[1]:.0f}) "
+            f"r {c[2]:.0f} px that the presses do not: is it a press frame? Every press is "
+            "measured against it, and circles are found there instead of at their own contact; "
+            "pass a frame of the untouched gel, or --estimate-background"]
+
+
 def _crowded_warning(shape: tuple[int, int], presses: list[Press], n_frames: int) -> list[str]:
     """A warning when half or more of the presses the background was estimated from touch one
     spot: the median there is a press (`background.crowded`)."""
@@ -682,6 +697,9 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
     bg, bg_how = _resolve_background(root, sessions, frames, background, estimate_background,
                                      shape)
     presses, warnings, lost = [], [], []
+    if not estimate_background and balls:
+        warnings.extend(_own_contact_warning(bg, bg_how, frames,
+                                             ball_radius_px(min(balls), scale)))
     record: list[dict[str, Any]] = []
     for e, img in zip(entries, frames, strict=True):
         truth = root / e.truth if e.truth else None
