@@ -18,7 +18,9 @@ span more pixels: the grid moved, at 2x, and at 2.5x rotated then JPEG-compresse
 frame of about 400x300 with contacts of about 42 px); the frame cut by an eighth of each side
 (contacts near the edge cut by the border), and coloured side lights that fall off across the
 gel (each channel's light a ramp of 1 -/+ RAMP along its own direction, so that bright lobes
-clip at 255), and a monochrome camera (every channel the grey level). Any variants joined by
+clip at 255), a monochrome camera (every channel the grey level), and a camera moved between
+the background and the presses (the background shifted by BG_SHIFT px; Taxim alone, DIGIT's
+background is estimated from its presses). Any variants joined by
 "-" are applied in turn (`--variants x1.25-mirror-noise`).
 Per set and variant, one row: presses used and dropped (`calibrate --circles detect`), the detected
 circles against the labels (centre distance, median and share within 3 px of the variant's pixels,
@@ -57,7 +59,7 @@ from circles_real import REAL, held_out_rmse
 VARIANTS = ("base", "rot90", "mirror", "x0.5", "x1.5", "x2", "jpeg75", "markers", "swap", "dim",
             "rot90-markers-jpeg75", "moved", "rot90-moved-jpeg75", "noise", "blur", "vignette",
             "balance", "exposure", "x2-moved", "x2.5-rot90-moved-jpeg75", "crop", "ramp",
-            "crop-ramp", "crop-rot90-ramp-jpeg75", "grey")
+            "crop-ramp", "crop-rot90-ramp-jpeg75", "grey", "bgshift", "markers-bgshift")
 #: Other cameras: noise (DN, per pixel and channel), defocus (Gaussian sigma, px), corners
 #: darkened to this share of the centre's light; a white balance (R, G, B gains) and an auto
 #: exposure that makes the presses brighter than the background by this factor.
@@ -66,6 +68,8 @@ BALANCE, EXPOSURE = (1.15, 1.0, 0.85), 1.08
 #: Coloured side lights: each channel's light a ramp from 1 - RAMP to 1 + RAMP across the frame,
 #: each along its own direction (0, 120 and 240 degrees).
 RAMP = 0.4
+#: A camera moved between the background and the presses: the background shifted by (x, y) px.
+BG_SHIFT = (2.0, 1.0)
 MARKER_MM_PER_PX = 0.0634  # GelSight Mini at 320x240 (gelsight_mini_objects/gsmini.yaml)
 TAXIM_MM_PER_PX, TAXIM_BALL_MM = 0.1245, 2.0
 DIGIT_MM_PER_PX, DIGIT_BALL_MM = 1 / 21.09, 3.0
@@ -227,6 +231,14 @@ def variant(s: PressSet, how: str, layer: np.ndarray | None) -> PressSet | None:
         out = s.map(lambda a: _u8(a * EXPOSURE), _same)
         return PressSet(out.name, out.images, s.bg, out.labels, out.mm_per_px, out.ball_mm,
                         out.factor, out.fwd)
+    if how == "bgshift":  # the camera moved by BG_SHIFT between the background and the presses
+        if s.bg is None:
+            return None
+        move = np.float32([[1, 0, BG_SHIFT[0]], [0, 1, BG_SHIFT[1]]])
+        bg = cv2.warpAffine(s.bg, move, s.bg.shape[1::-1], flags=cv2.INTER_LINEAR,
+                            borderMode=cv2.BORDER_REFLECT)
+        return PressSet(s.name, s.images, bg, s.labels, s.mm_per_px, s.ball_mm, s.factor,
+                        s.fwd)
     if how == "crop":  # an eighth of each side cut off: contacts near the edge cut by the border
         def crop(a: np.ndarray) -> np.ndarray:
             h, w = a.shape[:2]
@@ -482,7 +494,9 @@ def main() -> None:
             for how in args.variants.split(","):
                 v = variant(s, how, layer)
                 if v is None:
-                    print(f"| {s.name} | {how} | not built: no marker video |")
+                    why = ("no background to shift (estimated from the presses)"
+                           if "bgshift" in how and s.bg is None else "no marker video")
+                    print(f"| {s.name} | {how} | not built: {why} |")
                     continue
                 t0 = time.perf_counter()
                 rec, opts = write(v, Path(tmp) / f"{s.name}-{how}")
