@@ -1,0 +1,75 @@
+"""What the background's checks cost `calibrate`: loading the presses (frames, background, every
+circle detected and checked) with and without `background.own_contact` (a given background
+that shows a contact of its own), in alternated rounds on the same folder, and the check alone.
+
+Folders: simulated presses (`vtsbench simulate`, 480x640 at 0.03 mm/px, 30 presses) and, when
+../shared/data/real is there, Taxim's 49 presses (120x160) with their background.
+
+    .venv/bin/python benchmarks/background_checks.py [--rounds 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from machine import machine  # benchmarks/machine.py: the shared machine line
+
+
+def folders(tmp: Path) -> list[tuple[str, Path]]:
+    """(name, recordings folder) of each set timed here."""
+    from vtsbench.sim.simulate import simulate
+
+    out = [("simulated, 30 presses of 480x640", tmp / "sim")]
+    simulate(out[0][1], seed=2, n_static=0, n_sequences=0, n_presses=30)
+    real = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
+    pack = real / "taxim_gelsight_ball" / "dataPack_small.npz"
+    if pack.is_file():
+        from vtsbench.recordings.taxim import taxim_recordings
+
+        out.append(("Taxim, 49 presses of 120x160", taxim_recordings(pack, tmp / "taxim")))
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rounds", type=int, default=5)
+    args = ap.parse_args()
+    import vtsbench.depth.calibration as cal
+    from vtsbench.depth.background import own_contact
+    from vtsbench.depth.sphere import ball_radius_px
+
+    check = cal._own_contact_warning
+    print("| presses | load with the check, s | without, s | ratio | the check alone, s |")
+    print("|---|---:|---:|---:|---:|")
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, root in folders(Path(tmp)):
+            times: dict[str, list[float]] = {"with": [], "without": []}
+            try:
+                for _ in range(args.rounds):
+                    for mode in times:
+                        cal._own_contact_warning = check if mode == "with" else \
+                            (lambda *a, **k: [])
+                        t0 = time.perf_counter()
+                        cal.load_presses(root)
+                        times[mode].append(time.perf_counter() - t0)
+            finally:
+                cal._own_contact_warning = check
+            _, bg, setup, _ = cal.load_presses(root)
+            frames = list(setup["frames"].values())
+            ball = ball_radius_px(setup["ball_radius_mm"], setup["mm_per_px"])
+            t0 = time.perf_counter()
+            for _ in range(args.rounds):
+                own_contact(bg, frames, ball)
+            alone = (time.perf_counter() - t0) / args.rounds
+            w, wo = min(times["with"]), min(times["without"])
+            print(f"| {name} | {w:.2f} | {wo:.2f} | {w / wo:.2f}x | {alone:.3f} |", flush=True)
+    print(f"\nBest of {args.rounds} alternated rounds. Machine: {machine()}")
+
+
+if __name__ == "__main__":
+    main()
