@@ -112,3 +112,27 @@ def test_the_true_background_is_quiet_where_every_press_touches(tmp_path) -> Non
     rec = _presses(tmp_path / "rec", 8.0)
     _, _, _, warns = load_presses(rec, background=rec / "bg.png")
     assert not _own(warns), warns
+
+
+def test_the_contact_sheet_says_what_is_wrong_with_the_background(tmp_path) -> None:
+    """A run whose background is a press frame: its note is on the run and in red under the
+    contact sheet's title (the tiles all look wrong, the note says why)."""
+    from vtsbench.depth.calibration import calibrate
+    from vtsbench.depth.report import contact_sheet
+    from vtsbench.recordings.media import read_image
+
+    rec = _presses(tmp_path / "rec", 120.0)
+    run = calibrate(rec, method="poly", holdout=2, background=rec / "p" / "0.png")
+    assert len(run.background_notes) == 1 and run.background_notes[0] in run.warnings
+    said = read_image(contact_sheet(run, tmp_path / "said.png"))
+    quiet = read_image(contact_sheet(dataclasses.replace(run, background_notes=[]),
+                                     tmp_path / "quiet.png"))
+    assert said.shape[0] > quiet.shape[0] and said.shape[1] == quiet.shape[1]
+
+    def red(img: np.ndarray) -> int:
+        band = img[: img.shape[0] // 8].astype(int)
+        return int(((band[..., 0] > 200) & (band[..., 1] < 60) & (band[..., 2] < 60)).sum())
+
+    assert red(said) > 200 and red(quiet) == 0
+    assert calibrate(rec, method="poly", holdout=2, background=rec / "bg.png"
+                     ).background_notes == []

@@ -432,6 +432,9 @@ class CalibrationRun:
     presses: list[dict[str, Any]] = field(default_factory=list)
     #: Every press frame by id, used or dropped (the report's contact sheet draws them).
     frames: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    #: What is wrong with the background, if anything (also among the warnings; the contact
+    #: sheet shows it under its title).
+    background_notes: list[str] = field(default_factory=list)
 
     @property
     def dropped(self) -> list[str]:
@@ -697,9 +700,9 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
     bg, bg_how = _resolve_background(root, sessions, frames, background, estimate_background,
                                      shape)
     presses, warnings, lost = [], [], []
-    if not estimate_background and balls:
-        warnings.extend(_own_contact_warning(bg, bg_how, frames,
-                                             ball_radius_px(min(balls), scale)))
+    bg_notes = [] if estimate_background or not balls else _own_contact_warning(
+        bg, bg_how, frames, ball_radius_px(min(balls), scale))
+    warnings.extend(bg_notes)
     record: list[dict[str, Any]] = []
     for e, img in zip(entries, frames, strict=True):
         truth = root / e.truth if e.truth else None
@@ -742,12 +745,14 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
                             "used as labelled")
         record.append(row)
     if estimate_background:
-        warnings.extend(_crowded_warning(shape, presses, len(frames)))
+        bg_notes = _crowded_warning(shape, presses, len(frames))
+        warnings.extend(bg_notes)
     radii = sorted({p.ball_radius_mm for p in presses})
     setup = {"root": root, "sensor": sensors[0], "shape": shape, "mm_per_px": scale,
              "background": bg_how, "lost": lost, "n_entries": len(entries), "presses": record,
              "ball_radius_mm": radii[0] if radii else float(entries[0].ball_radius_mm),
              "frames": {e.id: img for e, img in zip(entries, frames, strict=True)},
+             "background_notes": bg_notes,
              "sources": {e.id: root / e.source.path for e in entries}}
     if len(radii) > 1:
         warnings.append(f"presses of several ball radii ({radii} mm); the file records "
@@ -1019,7 +1024,7 @@ def calibrate(folder: str | Path, *, method: str = "mlp", holdout: int | None = 
     examples = [] if results else [evaluate_press(cal, p, solver=solver, held_out=False)
                                    for p in train[:3]]
     return CalibrationRun(cal, results, warnings, time.perf_counter() - t0, examples,
-                          setup["presses"], setup["frames"])
+                          setup["presses"], setup["frames"], setup["background_notes"])
 
 
 def _scored_against_labels(cal: Calibration, results: list[HeldOut],

@@ -225,6 +225,17 @@ def contact_sheet(run: CalibrationRun, path: str | Path) -> Path:
     fig.suptitle(f"{len(recs)} presses, {len(recs) - n_drop} used, {n_drop} dropped; circles: "
                  f"{LABEL_COLOUR} dashed = labelled, {DETECTED_COLOUR} = detected, thick = used",
                  fontsize=FONT + 1)
+    top = 0.97
+    if run.background_notes:  # a background that is not one spoils every tile: say it here
+        import textwrap
+
+        lines = textwrap.wrap(" ".join(run.background_notes),
+                              width=max(50, int(11 * 1.9 * cols)))  # ~11 characters an inch
+        fig.set_figheight(fig.get_figheight() + 0.17 * len(lines))
+        height = fig.get_figheight()
+        fig.text(0.5, 1 - 0.3 / height, "\n".join(lines), ha="center", va="top",
+                 color=STATUS_COLOUR["dropped"], fontsize=FONT)
+        top = 1 - (0.3 + 0.17 * len(lines)) / height
     if not recs:
         fig.text(0.5, 0.5, "no presses", ha="center")
     for i, rec in enumerate(recs):
@@ -259,5 +270,5 @@ def contact_sheet(run: CalibrationRun, path: str | Path) -> Path:
             ax.set_xlim(x0 - 0.5, x1 - 0.5)
             ax.set_ylim(y1 - 0.5, y0 - 0.5)
         ax.set_xlabel(_tile_text(rec, held), fontsize=FONT - 1, color=colour)
-    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    fig.tight_layout(rect=(0, 0, 1, top))
     return save_png(fig, path)
