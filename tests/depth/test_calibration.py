@@ -207,6 +207,42 @@ def test_unlabelled_circles_are_detected(sim, tmp_path) -> None:
         assert r.errors["gradient_rmse"] < 0.15
 
 
+@pytest.fixture(scope="module")
+def wide(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """10 presses in frames of 240x320 (contacts small against the frame, so a circle in the
+    wrong place misses its imprint)."""
+    from vtsbench.sim.simulate import simulate
+
+    root = tmp_path_factory.mktemp("wide") / "sim"
+    simulate(root, seed=5, n_static=0, n_sequences=0, n_presses=10, size=(240, 320),
+             mm_per_px=0.05, generator=1)
+    return root
+
+
+@pytest.mark.parametrize("layout, move", [
+    ("with x and y swapped", lambda c, h, w: (c.y, c.x, c.r)),
+    ("upside down", lambda c, h, w: (c.x, h - 1 - c.y, c.r)),
+    ("as pixels of a frame half the size", lambda c, h, w: ((c.x + 0.5) / 2 - 0.5,
+                                                            (c.y + 0.5) / 2 - 0.5, c.r / 2)),
+])
+def test_labels_written_another_way_get_a_hint(wide, tmp_path, layout, move) -> None:
+    """Labels written as (row, column), upside down or on a frame half the size: the doubted
+    circles are used as labelled (the user's word), and one warning says how they would fit."""
+    from vtsbench.recordings.manifest import Circle
+
+    def edit(entries, sessions):
+        h, w = sessions[0].resolution
+        return [replace(e, circle=Circle(*move(e.circle, h, w))) for e in entries], sessions
+
+    folder = copy_folder(wide, tmp_path / "f", edit=edit)
+    _, _, setup, warns = load_presses(folder)
+    hint = [w for w in warns if "labelled circles do not fit" in w]
+    assert len(hint) == 1 and f"read {layout}" in hint[0], warns
+    assert sum(p["status"] == "doubted" for p in setup["presses"]) >= 3
+    _, _, _, warns = load_presses(wide)  # as labelled: no hint
+    assert not [w for w in warns if "labelled circles do not fit" in w]
+
+
 def test_missing_scale_background_and_radius(sim, tmp_path) -> None:
     no_scale = copy_folder(sim, tmp_path / "a", edit=lambda e, s: (
         e, [replace(x, mm_per_px=None) for x in s]))
@@ -369,6 +405,7 @@ def test_digit_presses_say_what_they_lack_then_calibrate(tmp_path) -> None:
     # (docs/depth.md); nothing is dropped
     assert "dropped" not in res.stderr and "dropped" not in res.stdout
     assert "the median there is a press" not in res.stderr  # at most 3 of 16 touch one spot
+    assert "labelled circles do not fit" not in res.stderr  # the labels are where they belong
     cal = load_calibration(out, resolution=(320, 240))
     assert cal.n_presses == 13
     # Measured: held-out plane-aligned RMSE 0.012 and 0.045 mm against the sphere model.

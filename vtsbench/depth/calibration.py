@@ -581,6 +581,47 @@ def _own_contact_warning(bg: np.ndarray, how: str, frames: list[np.ndarray],
             "pass a frame of the untouched gel, or --estimate-background"]
 
 
+#: Labelled circles read another way, for `_label_layout_hint`: (x, y, r) of a circle in a frame
+#: of (h, w) as the labels would give it had they been written in that layout.
+Layout = Callable[[float, float, float, int, int], tuple[float, float, float]]
+LABEL_LAYOUTS: dict[str, Layout] = {
+    "with x and y swapped (as row, column)": lambda x, y, r, h, w: (y, x, r),
+    "mirrored left to right": lambda x, y, r, h, w: (w - 1 - x, y, r),
+    "upside down (rows counted from the bottom)": lambda x, y, r, h, w: (x, h - 1 - y, r),
+    "turned half a turn": lambda x, y, r, h, w: (w - 1 - x, h - 1 - y, r),
+    "as pixels of a frame twice the size": lambda x, y, r, h, w: (
+        (x + 0.5) / 2 - 0.5, (y + 0.5) / 2 - 0.5, r / 2),
+    "as pixels of a frame half the size": lambda x, y, r, h, w: (
+        (x + 0.5) * 2 - 0.5, (y + 0.5) * 2 - 0.5, r * 2),
+}
+#: The hint is given when at least this share of the labelled presses (and 3) are doubted, and
+#: another layout lets LAYOUT_PASS of them pass the check, 3 more than pass as written. (A large
+#: contact in a small frame can still cover much of a swapped circle: on 10 simulated presses of
+#: 18-34 px in 120x160 frames, swapping x and y left 6 passing.)
+LABELS_DOUBTED, LAYOUT_PASS = 0.3, 0.8
+
+
+def _label_layout_hint(record: list[dict[str, Any]], frames: dict[str, np.ndarray],
+                       bg: np.ndarray, shape: tuple[int, int], ball_px: float) -> list[str]:
+    """A warning when most labelled circles are doubted and the labels read in another layout
+    (`LABEL_LAYOUTS`: x and y swapped, mirrored, upside down, another frame size) would pass the
+    check: labels written as (row, column), or in a flipped or resized frame's pixels."""
+    rows = [r for r in record if r["source"] == "label" and r["label"]]
+    doubted = [r for r in rows if r["status"] == "doubted"]
+    if ball_px <= 0 or len(doubted) < max(3, LABELS_DOUBTED * len(rows)):
+        return []
+    h, w = shape
+    for name, move in LABEL_LAYOUTS.items():
+        passed = sum(not circle_doubts(move(r["label"]["x"], r["label"]["y"], r["label"]["r"],
+                                            h, w), frames[r["id"]], bg, ball_px) for r in rows)
+        if passed >= max(LAYOUT_PASS * len(rows), len(rows) - len(doubted) + 3):
+            return [f"{len(doubted)} of {len(rows)} labelled circles do not fit their presses' "
+                    f"colour change; read {name}, {passed} of them do: were the labels written "
+                    "that way? Fix the labels (or the manifest's circles), or run --circles "
+                    "detect"]
+    return []
+
+
 def _crowded_warning(shape: tuple[int, int], presses: list[Press], n_frames: int) -> list[str]:
     """A warning when half or more of the presses the background was estimated from touch one
     spot: the median there is a press (`background.crowded`)."""
@@ -747,6 +788,10 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
     if estimate_background:
         bg_notes = _crowded_warning(shape, presses, len(frames))
         warnings.extend(bg_notes)
+    if circles != "detect":
+        warnings.extend(_label_layout_hint(record, dict(zip([e.id for e in entries], frames,
+                                                            strict=True)), bg, shape,
+                                           ball_radius_px(min(balls), scale) if balls else 0))
     radii = sorted({p.ball_radius_mm for p in presses})
     setup = {"root": root, "sensor": sensors[0], "shape": shape, "mm_per_px": scale,
              "background": bg_how, "lost": lost, "n_entries": len(entries), "presses": record,
