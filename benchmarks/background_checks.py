@@ -1,6 +1,8 @@
 """What the background's checks cost `calibrate`: loading the presses (frames, background, every
-circle detected and checked) with and without `background.own_contact` (a given background
-that shows a contact of its own), in alternated rounds on the same folder, and the check alone.
+circle detected and checked) with and without the checks of a given background against the
+presses' median (`calibration._background_warnings`: its channel order, `background.
+channels_reversed`, and a contact of its own, `background.own_contact`), in alternated rounds on
+the same folder, and the checks alone.
 
 Folders: simulated presses (`vtsbench simulate`, 480x640 at 0.03 mm/px, 30 presses) and, when
 ../shared/data/real is there, Taxim's 49 presses (120x160) with their background.
@@ -40,11 +42,10 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=5)
     args = ap.parse_args()
     import vtsbench.depth.calibration as cal
-    from vtsbench.depth.background import own_contact
     from vtsbench.depth.sphere import ball_radius_px
 
-    check = cal._own_contact_warning
-    print("| presses | load with the check, s | without, s | ratio | the check alone, s |")
+    check = cal._background_warnings
+    print("| presses | load with the checks, s | without, s | ratio | the checks alone, s |")
     print("|---|---:|---:|---:|---:|")
     with tempfile.TemporaryDirectory() as tmp:
         for name, root in folders(Path(tmp)):
@@ -52,19 +53,19 @@ def main() -> None:
             try:
                 for _ in range(args.rounds):
                     for mode in times:
-                        cal._own_contact_warning = check if mode == "with" else \
+                        cal._background_warnings = check if mode == "with" else \
                             (lambda *a, **k: [])
                         t0 = time.perf_counter()
                         cal.load_presses(root)
                         times[mode].append(time.perf_counter() - t0)
             finally:
-                cal._own_contact_warning = check
+                cal._background_warnings = check
             _, bg, setup, _ = cal.load_presses(root)
             frames = list(setup["frames"].values())
             ball = ball_radius_px(setup["ball_radius_mm"], setup["mm_per_px"])
             t0 = time.perf_counter()
             for _ in range(args.rounds):
-                own_contact(bg, frames, ball)
+                check(bg, "", frames, ball)
             alone = (time.perf_counter() - t0) / args.rounds
             w, wo = min(times["with"]), min(times["without"])
             print(f"| {name} | {w:.2f} | {wo:.2f} | {w / wo:.2f}x | {alone:.3f} |", flush=True)

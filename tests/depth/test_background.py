@@ -136,3 +136,24 @@ def test_the_contact_sheet_says_what_is_wrong_with_the_background(tmp_path) -> N
     assert red(said) > 200 and red(quiet) == 0
     assert calibrate(rec, method="poly", holdout=2, background=rec / "bg.png"
                      ).background_notes == []
+
+
+def test_a_background_in_the_other_channel_order_is_named(tmp_path) -> None:
+    """The background saved with its channels reversed (BGR for RGB): named with both
+    distances; the presses' own order is quiet, and so is a grey gel, where order is moot."""
+    from vtsbench.depth.background import channels_reversed
+    from vtsbench.recordings.media import read_image
+
+    rec = _presses(tmp_path / "rec", 120.0)
+    bg = read_image(rec / "bg.png")
+    write_png(rec / "bgr.png", np.ascontiguousarray(bg[..., ::-1]))
+    _, _, _, warns = load_presses(rec, background=rec / "bgr.png")
+    hit = [w for w in warns if "colour channels in the other order" in w]
+    assert len(hit) == 1 and not _own(warns), warns
+    _, _, _, warns = load_presses(rec, background=rec / "bg.png")
+    assert not [w for w in warns if "other order" in w]
+    grey = np.full((8, 8, 3), 120, np.uint8)
+    assert channels_reversed(grey, grey + 10) is None  # 30 DN off either way
+    given, rev = channels_reversed(np.dstack([grey[..., 0] + 40, grey[..., 1], grey[..., 2]]),
+                                   np.dstack([grey[..., 0], grey[..., 1], grey[..., 2] + 40]))
+    assert (given, rev) == (80.0, 0.0)

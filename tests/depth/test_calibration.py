@@ -385,6 +385,11 @@ def test_a_real_press_given_as_the_background_is_named(tmp_path) -> None:
     label = next(p["label"] for p in setup["presses"] if p["id"] == "press-010")
     x, y = (float(v) for v in hit[0].split(" at (")[1].split(")")[0].split(", "))
     assert abs(x - label["x"]) < 4 and abs(y - label["y"]) < 4
+    # its own background with the channels reversed: named for that
+    bgr = tmp_path / "bgr.png"
+    write_png(bgr, np.ascontiguousarray(read_image(folder / "background.png")[..., ::-1]))
+    _, _, _, warns = load_presses(folder, background=bgr)
+    assert [w for w in warns if "colour channels in the other order" in w], warns
 
 
 @pytest.mark.real

@@ -77,17 +77,17 @@ OWN_CONTACT_SPREAD = 2.0
 MIN_FRAMES = 5
 
 
-def own_contact(background: np.ndarray, frames: Sequence[np.ndarray], ball_px: float
-                ) -> tuple[float, float, float] | None:
+def own_contact(background: np.ndarray, frames: Sequence[np.ndarray], ball_px: float,
+                med: np.ndarray | None = None) -> tuple[float, float, float] | None:
     """The contact circle (x, y, r px) that a given background shows against the presses'
-    median and the presses do not (see OWN_CONTACT_SPREAD; a noise below 1 DN counts as 1),
-    or None."""
+    median (`med`, when the caller has it) and the presses do not (see OWN_CONTACT_SPREAD; a
+    noise below 1 DN counts as 1), or None."""
     if len(frames) < MIN_FRAMES:
         return None
     from .imprint import ring_contrast
     from .sphere import RING_Z_MIN, change_map, circle_doubts, default_sigma, detect_circle
 
-    med = press_median(frames)
+    med = press_median(frames) if med is None else med
     c = detect_circle(background, med, ball_px=ball_px, restarts=False)
     if c is None:
         return None
@@ -109,3 +109,22 @@ def own_contact(background: np.ndarray, frames: Sequence[np.ndarray], ball_px: f
     noise = float(np.median(np.median(np.stack(
         [np.abs(f[::4, ::4] - grid).sum(-1) for f in frames]), axis=0)))
     return c if inside < OWN_CONTACT_SPREAD * max(noise, 1.0) else None
+
+
+#: A given background whose colour channels come in the other order than the presses' (a BGR
+#: file where RGB was meant, or the other way): reversed, it lies at most SWAP_GAIN times as far
+#: from the presses' median as it does as given, and as given at least SWAP_MIN_DN (the median
+#: over pixels of the difference summed over channels). Measured: Taxim's background reversed,
+#: 44 DN as given and 15 reversed (its own background: 15 and 44, the light having drifted);
+#: simulated backgrounds 2-3 DN as given, 6-52 reversed.
+SWAP_GAIN, SWAP_MIN_DN = 0.5, 6.0
+
+
+def channels_reversed(background: np.ndarray, med: np.ndarray) -> tuple[float, float] | None:
+    """(as given, reversed): how far the background lies from the presses' median `med` as
+    given and with its channels reversed (DN, see SWAP_GAIN), when reversed fits them; None
+    otherwise."""
+    b, m = background.astype(np.float32), med.astype(np.float32)
+    given = float(np.median(np.abs(b - m).sum(-1)))
+    rev = float(np.median(np.abs(b[..., ::-1] - m).sum(-1)))
+    return (given, rev) if given >= SWAP_MIN_DN and rev <= SWAP_GAIN * given else None

@@ -566,13 +566,23 @@ def _resolve_background(root: Path, sessions: list[Any], frames: list[np.ndarray
     return bg, how
 
 
-def _own_contact_warning(bg: np.ndarray, how: str, frames: list[np.ndarray],
+def _background_warnings(bg: np.ndarray, how: str, frames: list[np.ndarray],
                          ball_px: float) -> list[str]:
-    """A warning when the background shows a contact the presses do not
-    (`background.own_contact`: a press frame given as the background)."""
-    from .background import own_contact
+    """Warnings about a given background held against the presses' median: its colour
+    channels in the other order (`background.channels_reversed`), or a contact the presses do
+    not show (`background.own_contact`: a press frame given as the background)."""
+    from .background import MIN_FRAMES, channels_reversed, own_contact, press_median
 
-    c = own_contact(bg, frames, ball_px)
+    if len(frames) < MIN_FRAMES:
+        return []
+    med = press_median(frames)
+    rev = channels_reversed(bg, med)
+    if rev is not None:
+        return [f"the background ({how}) has its colour channels in the other order from the "
+                f"presses' (it lies {rev[0]:.0f} DN from their median, {rev[1]:.0f} DN with its "
+                "channels reversed): was it saved as BGR where RGB was meant, or the other way? "
+                "Save it as the presses are saved"]
+    c = own_contact(bg, frames, ball_px, med)
     if c is None:
         return []
     return [f"the background ({how}) shows a contact of its own at ({c[0]:.0f}, {c[1]:.0f}) "
@@ -741,7 +751,7 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
     bg, bg_how = _resolve_background(root, sessions, frames, background, estimate_background,
                                      shape)
     presses, warnings, lost = [], [], []
-    bg_notes = [] if estimate_background or not balls else _own_contact_warning(
+    bg_notes = [] if estimate_background or not balls else _background_warnings(
         bg, bg_how, frames, ball_radius_px(min(balls), scale))
     warnings.extend(bg_notes)
     record: list[dict[str, Any]] = []
