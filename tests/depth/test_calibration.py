@@ -275,7 +275,14 @@ def test_impossible_presses_are_refused(sim, tmp_path) -> None:
     big = copy_folder(sim, tmp_path / "b", edit=lambda e, s: (
         [e[0], replace(e[1], circle=Circle(80.0, 60.0, 70.0)), *e[2:]], s))
     msg = one_line_error(calibrate, big, method="lut", match="press-00002: circle radius 70")
-    assert "50.0 px" in msg
+    assert "50.0 px" in msg and "(or is it a diameter?)" in msg  # 70 / 2 fits the 50 px ball
+    huge = copy_folder(sim, tmp_path / "c", edit=lambda e, s: (
+        [e[0], replace(e[1], circle=Circle(80.0, 60.0, 130.0)), *e[2:]], s))
+    msg = one_line_error(calibrate, huge, method="lut", match="circle radius 130")
+    assert "diameter" not in msg  # halved, still larger than the ball
+    diam = copy_folder(sim, tmp_path / "d", edit=lambda e, s: (
+        [replace(x, circle=Circle(x.circle.x, x.circle.y, 2 * x.circle.r)) for x in e], s))
+    one_line_error(calibrate, diam, method="lut", match="diameter")
     one_line_error(calibrate, sim, method="spline", match="unknown method")
     one_line_error(calibrate, sim, method="lut", background=sim / "s00" / "background.png",
                    estimate_background=True, match="either")
@@ -438,3 +445,14 @@ def test_rim_shrink_chosen_by_cross_validation_on_training_presses(sim) -> None:
                       options={"bins": 16, "cells": 1})
     assert "rim_cv_mm" not in plain.calibration.fit
     assert [h.press.id for h in plain.held_out] == [h.press.id for h in run.held_out]
+
+
+def test_a_scale_refused_for_labels_twice_the_ball_asks_about_diameters() -> None:
+    from vtsbench.depth.calibration import check_scale
+
+    with pytest.raises(VtsError, match="are the labels' radii diameters") as err:
+        check_scale((0.1245, 0.1245), 2.0, (120, 160), [34.0] * 9, False)
+    assert "larger than 34 px" in str(err.value)
+    with pytest.raises(VtsError) as err:  # four times the ball: not diameters either
+        check_scale((0.1245, 0.1245), 2.0, (120, 160), [64.0] * 9, False)
+    assert "diameters" not in str(err.value)

@@ -514,6 +514,9 @@ def check_scale(scale: tuple[float, float], ball_radius_mm: float, shape: tuple[
     inv = 1.0 / scale[0]
     if scale[0] > 1.0 and 2.0 <= ball_radius_mm / inv <= math.hypot(h, w):
         hint = f"; {scale[0]:g} looks like px per mm: did you mean --mm-per-px {inv:.5g}?"
+    elif radii_px and RADIUS_TOLERANCE * ball < float(np.median(radii_px)) <= \
+            2 * RADIUS_TOLERANCE * ball:
+        hint = "; or are the labels' radii diameters? (halved, half of them fit the ball)"
     raise VtsError(f"{what} {why} (check the scale and the ball radius){hint}")
 
 
@@ -738,9 +741,12 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
         if e.circle is not None:
             r_ball = ball_radius_px(e.ball_radius_mm, scale)
             if e.circle.r > RADIUS_TOLERANCE * r_ball:
+                half = " (or is it a diameter?)" if e.circle.r <= 2 * RADIUS_TOLERANCE * r_ball \
+                    else ""
                 raise VtsError(f"press {e.id}: circle radius {e.circle.r:g} px is larger than "
                                f"the ball ({e.ball_radius_mm:g} mm = {r_ball:.1f} px at "
-                               f"{scale[0]:g} mm/px); check the scale or the ball radius", root)
+                               f"{scale[0]:g} mm/px); check the scale or the ball radius{half}",
+                               root)
     frames = []
     for e in entries:
         img = _press_frame(root, e)
