@@ -28,10 +28,14 @@ def calibrate(
         high=100.0,
         help="Scale in mm per pixel (default: from the recordings).")] = None,
     background: Annotated[Path | None, typer.Option(
-        help="No-contact image (default: the sessions' backgrounds).")] = None,
+        help="No-contact image (default: the sessions' backgrounds); one that shows a contact "
+             "of its own, or has its colour channels in the other order from the presses', "
+             "is named in a warning.")] = None,
     estimate_background: Annotated[bool, typer.Option(
         "--estimate-background",
-        help="Use the per-pixel median of the press frames as the background.")] = False,
+        help="Use the per-pixel median of the press frames as the background (for sets "
+             "recorded without one; warned where half or more of the presses touch one "
+             "spot).")] = False,
     report: Annotated[Path | None, typer.Option(
         help="Report folder (default: FILE.report beside the calibration).")] = None,
     solver: Annotated[Literal["dct", "dst", "masked"], choice(
