@@ -616,17 +616,23 @@ LABELS_DOUBTED, LAYOUT_PASS = 0.3, 0.8
 
 def _label_layout_hint(record: list[dict[str, Any]], frames: dict[str, np.ndarray],
                        bg: np.ndarray, shape: tuple[int, int], ball_px: float) -> list[str]:
-    """A warning when most labelled circles are doubted and the labels read in another layout
-    (`LABEL_LAYOUTS`: x and y swapped, mirrored, upside down, another frame size) would pass the
-    check: labels written as (row, column), or in a flipped or resized frame's pixels."""
+    """A warning when many labelled circles are doubted (LABELS_DOUBTED) and the labels read in
+    another layout (`LABEL_LAYOUTS`: x and y swapped, mirrored, upside down, another frame
+    size) would pass the check: labels written as (row, column), or in a flipped or resized
+    frame's pixels. Each press's change map is built once for all the layouts."""
+    from .sphere import change_map, default_sigma
+
     rows = [r for r in record if r["source"] == "label" and r["label"]]
     doubted = [r for r in rows if r["status"] == "doubted"]
     if ball_px <= 0 or len(doubted) < max(3, LABELS_DOUBTED * len(rows)):
         return []
     h, w = shape
+    maps = {r["id"]: change_map(frames[r["id"]], bg, default_sigma(shape), markers=True)
+            for r in rows}
     for name, move in LABEL_LAYOUTS.items():
         passed = sum(not circle_doubts(move(r["label"]["x"], r["label"]["y"], r["label"]["r"],
-                                            h, w), frames[r["id"]], bg, ball_px) for r in rows)
+                                            h, w), frames[r["id"]], bg, ball_px, maps[r["id"]])
+                     for r in rows)
         if passed >= max(LAYOUT_PASS * len(rows), len(rows) - len(doubted) + 3):
             return [f"{len(doubted)} of {len(rows)} labelled circles do not fit their presses' "
                     f"colour change; read {name}, {passed} of them do: were the labels written "
