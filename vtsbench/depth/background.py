@@ -39,6 +39,20 @@ def press_median(frames: Sequence[np.ndarray]) -> np.ndarray:
     return out
 
 
+def _disc_box(x: float, y: float, r: float, shape: tuple[int, int]
+              ) -> tuple[tuple[slice, slice], np.ndarray] | None:
+    """The box (rows, columns) around a disc (x, y, r px) clipped to a frame of `shape`, and the
+    disc's pixels in it (bool); None when none of it lies in the frame."""
+    h, w = shape
+    x0, x1 = max(0, math.floor(x - r)), min(w, math.ceil(x + r) + 1)
+    y0, y1 = max(0, math.floor(y - r)), min(h, math.ceil(y + r) + 1)
+    if x0 >= x1 or y0 >= y1:
+        return None
+    yy, xx = np.ogrid[y0:y1, x0:x1]
+    mask = (xx - x) ** 2 + (yy - y) ** 2 <= r * r
+    return ((slice(y0, y1), slice(x0, x1)), mask) if mask.any() else None
+
+
 def crowded(shape: tuple[int, int], circles: Sequence[tuple[float, float, float]],
             n_frames: int) -> tuple[int, tuple[int, int]] | None:
     """(presses, (x, y) px): how many contact circles (x, y, r px) overlap most and the middle of
@@ -46,17 +60,13 @@ def crowded(shape: tuple[int, int], circles: Sequence[tuple[float, float, float]
     over; None otherwise."""
     if not circles or n_frames <= 0:
         return None
-    h, w = shape
-    count = np.zeros((h, w), np.int32)
+    count = np.zeros(shape, np.int32)
     for x, y, r in circles:
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(r)):
             continue
-        x0, x1 = max(0, math.floor(x - r)), min(w, math.ceil(x + r) + 1)
-        y0, y1 = max(0, math.floor(y - r)), min(h, math.ceil(y + r) + 1)
-        if x0 >= x1 or y0 >= y1:
-            continue
-        yy, xx = np.ogrid[y0:y1, x0:x1]
-        count[y0:y1, x0:x1] += (xx - x) ** 2 + (yy - y) ** 2 <= r * r
+        found = _disc_box(x, y, r, shape)
+        if found is not None:
+            count[found[0]] += found[1]
     top = int(count.max())
     if top < CROWDED_SHARE * n_frames:
         return None
@@ -94,17 +104,13 @@ def own_contact(background: np.ndarray, frames: Sequence[np.ndarray], ball_px: f
     m = change_map(background, med, default_sigma(background.shape[:2]), markers=True)
     if ring_contrast(m, c) < RING_Z_MIN or circle_doubts(c, background, med, ball_px, m):
         return None
-    h, w = m.shape
-    x, y, r = c
-    x0, x1 = max(0, math.floor(x - r)), min(w, math.ceil(x + r) + 1)
-    y0, y1 = max(0, math.floor(y - r)), min(h, math.ceil(y + r) + 1)
-    yy, xx = np.ogrid[y0:y1, x0:x1]
-    disc = (xx - x) ** 2 + (yy - y) ** 2 <= (0.8 * r) ** 2
-    if x0 >= x1 or y0 >= y1 or not disc.any():
+    found = _disc_box(c[0], c[1], 0.8 * c[2], m.shape)
+    if found is None:
         return None
-    ref = med[y0:y1, x0:x1].astype(np.float32)
+    box, disc = found
+    ref = med[box].astype(np.float32)
     inside = float(np.median(np.median(np.stack(
-        [np.abs(f[y0:y1, x0:x1] - ref).sum(-1)[disc] for f in frames]), axis=0)))
+        [np.abs(f[box] - ref).sum(-1)[disc] for f in frames]), axis=0)))
     grid = med[::4, ::4].astype(np.float32)  # the noise, on every 4th pixel (bounded memory)
     noise = float(np.median(np.median(np.stack(
         [np.abs(f[::4, ::4] - grid).sum(-1) for f in frames]), axis=0)))

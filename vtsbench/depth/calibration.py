@@ -763,8 +763,10 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
     bg, bg_how = _resolve_background(root, sessions, frames, background, estimate_background,
                                      shape)
     presses, warnings, lost = [], [], []
+    small_px = ball_radius_px(min(balls), scale) if balls else 0.0  # the smallest ball's radius
+    by_id = {e.id: img for e, img in zip(entries, frames, strict=True)}
     bg_notes = [] if estimate_background or not balls else _background_warnings(
-        bg, bg_how, frames, ball_radius_px(min(balls), scale))
+        bg, bg_how, frames, small_px)
     warnings.extend(bg_notes)
     record: list[dict[str, Any]] = []
     for e, img in zip(entries, frames, strict=True):
@@ -811,14 +813,12 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
         bg_notes = _crowded_warning(shape, presses, len(frames))
         warnings.extend(bg_notes)
     if circles != "detect":
-        warnings.extend(_label_layout_hint(record, dict(zip([e.id for e in entries], frames,
-                                                            strict=True)), bg, shape,
-                                           ball_radius_px(min(balls), scale) if balls else 0))
+        warnings.extend(_label_layout_hint(record, by_id, bg, shape, small_px))
     radii = sorted({p.ball_radius_mm for p in presses})
     setup = {"root": root, "sensor": sensors[0], "shape": shape, "mm_per_px": scale,
              "background": bg_how, "lost": lost, "n_entries": len(entries), "presses": record,
              "ball_radius_mm": radii[0] if radii else float(entries[0].ball_radius_mm),
-             "frames": {e.id: img for e, img in zip(entries, frames, strict=True)},
+             "frames": by_id,
              "background_notes": bg_notes,
              "sources": {e.id: root / e.source.path for e in entries}}
     if len(radii) > 1:
