@@ -2,7 +2,9 @@
 circle detected and checked) with and without the checks of a given background against the
 presses' median (`calibration._background_warnings`: its channel order, `background.
 channels_reversed`, and a contact of its own, `background.own_contact`), in alternated rounds on
-the same folder, and the checks alone.
+the same folder, and the checks alone; then the search for presses under another light than the
+background (`background.light_mates`, which every calibration runs) alone, and loading with and
+without the check of their circles against one another (`calibration._detect_against_mates`).
 
 Folders: simulated presses (`vtsbench simulate`, 480x640 at 0.03 mm/px, 30 presses) and, when
 ../shared/data/real is there, Taxim's 49 presses (120x160) with their background.
@@ -48,7 +50,8 @@ def main() -> None:
     print("| presses | load with the checks, s | without, s | ratio | the checks alone, s |")
     print("|---|---:|---:|---:|---:|")
     with tempfile.TemporaryDirectory() as tmp:
-        for name, root in folders(Path(tmp)):
+        sets = folders(Path(tmp))
+        for name, root in sets:
             times: dict[str, list[float]] = {"with": [], "without": []}
             try:
                 for _ in range(args.rounds):
@@ -69,7 +72,58 @@ def main() -> None:
             alone = (time.perf_counter() - t0) / args.rounds
             w, wo = min(times["with"]), min(times["without"])
             print(f"| {name} | {w:.2f} | {wo:.2f} | {w / wo:.2f}x | {alone:.3f} |", flush=True)
+        print("\n| presses | presses under another light | the search alone, s | load with the "
+              "check against them, s | without, s | ratio |\n|---|---|---:|---:|---:|---:|")
+        digit = digit_folder(Path(tmp) / "digit")
+        for name, root in sets + ([("DIGIT, 16 presses of 320x240, estimated background",
+                                    digit)] if digit else []):
+            opts = {"mm_per_px": 1 / 21.09, "estimate_background": True} if root == digit \
+                else {}
+            light_row(name, root, opts, args.rounds)
     print(f"\nBest of {args.rounds} alternated rounds. Machine: {machine()}")
+
+
+def digit_folder(tmp: Path) -> Path | None:
+    """The DIGIT presses as a recordings folder (two of them under another light), if here."""
+    from typer.testing import CliRunner
+
+    from vtsbench.cli import app
+
+    src = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real" / \
+        "digit_ball_6mm"
+    if not (src / "sphere.csv").is_file():
+        return None
+    res = CliRunner().invoke(app, ["manifest", str(src), "--pattern", "{name}.png", "--kind",
+                                   "press", "--ball-radius-mm", "3", "--circles",
+                                   str(src / "sphere.csv"), "--out", str(tmp)])
+    return tmp if res.exit_code == 0 else None
+
+
+def light_row(name: str, root: Path, opts: dict, rounds: int) -> None:
+    """One row: `background.light_mates` alone, and loading with and without
+    `calibration._detect_against_mates`, alternated."""
+    import vtsbench.depth.calibration as cal
+    from vtsbench.depth.background import light_mates
+
+    check = cal._detect_against_mates
+    times: dict[str, list[float]] = {"with": [], "without": []}
+    try:
+        for _ in range(rounds):
+            for mode in times:
+                cal._detect_against_mates = check if mode == "with" else (lambda *a, **k: [])
+                t0 = time.perf_counter()
+                cal.load_presses(root, **opts)
+                times[mode].append(time.perf_counter() - t0)
+    finally:
+        cal._detect_against_mates = check
+    _, bg, setup, _ = cal.load_presses(root, **opts)
+    t0 = time.perf_counter()
+    for _ in range(rounds):
+        groups = light_mates(setup["frames"], bg)
+    alone = (time.perf_counter() - t0) / rounds
+    w, wo = min(times["with"]), min(times["without"])
+    print(f"| {name} | {', '.join(sorted(groups)) or 'none'} | {alone:.4f} | {w:.2f} | "
+          f"{wo:.2f} | {w / wo:.2f}x |", flush=True)
 
 
 if __name__ == "__main__":

@@ -134,3 +134,98 @@ def channels_reversed(background: np.ndarray, med: np.ndarray) -> tuple[float, f
     given = float(np.median(np.abs(b - m).sum(-1)))
     rev = float(np.median(np.abs(b[..., ::-1] - m).sum(-1)))
     return (given, rev) if given >= SWAP_MIN_DN and rev <= SWAP_GAIN * given else None
+
+
+#: Presses under another light than the background: those that lie at least LIGHT_OUTLIER times
+#: as far from it as the nearest quarter of the presses do (the median over the frame of the
+#: difference summed over channels; DIGIT 0016 and 0017: 51-52 DN from the presses' median, the
+#: other 14 at 6-8; Taxim's 49 presses at 11-27 DN from their background, whose light drifted).
+LIGHT_OUTLIER = 2.0
+#: Such a press is held against other presses instead of the background when they lie at most
+#: LIGHT_MATE_RATIO times as far from it as the background does (DIGIT 0016 and 0017 from each
+#: other: 0.2 times).
+LIGHT_MATE_RATIO = 0.5
+#: A mate's own contact counts for nothing within MATE_GROW[0] times its radius and fully beyond
+#: MATE_GROW[1] times, rising smoothly between (a hard edge would leave a ring where the mates'
+#: mix changes, and a ring is what the detector looks for).
+MATE_GROW = (1.2, 1.6)
+#: The nearest mates that make a press's background (bounded memory and time).
+MAX_MATES = 8
+
+
+def _distance(a: np.ndarray, b: np.ndarray) -> float:
+    """The median over pixels of |a - b| summed over channels (DN), on every 4th pixel."""
+    return float(np.median(np.abs(a[::4, ::4].astype(np.int16) - b[::4, ::4]).sum(-1)))
+
+
+def light_mates(frames: dict[str, np.ndarray], background: np.ndarray
+                ) -> dict[str, list[str]]:
+    """Presses taken under another light than the background, each with the presses that share
+    its light (nearest first): those at least LIGHT_OUTLIER times as far from the background as
+    the nearest quarter, and of those the ones at most LIGHT_MATE_RATIO times as far from each
+    other as from the background. Only the far presses are compared pairwise."""
+    to_bg = {k: _distance(f, background) for k, f in frames.items()}
+    if len(to_bg) < 2:
+        return {}
+    quarter = float(np.percentile(list(to_bg.values()), 25))
+    far = [k for k, d in to_bg.items() if d >= max(2.0, LIGHT_OUTLIER * quarter)]
+    out = {}
+    for k in far:
+        near = sorted((_distance(frames[k], frames[j]), j) for j in far if j != k)
+        mates = [j for d, j in near if d <= LIGHT_MATE_RATIO * to_bg[k]]
+        if mates:
+            out[k] = mates
+    return out
+
+
+def mates_background(frames: Sequence[np.ndarray],
+                     circles: Sequence[tuple[float, float, float]], background: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """A background for a press from presses under its light, and where it is filled in (bool).
+
+    Each mate's light relative to the background (the log of their ratio, which a change of
+    light alone leaves smooth: the gel's own pattern and markers divide out) is averaged with
+    weights that leave out its contact smoothly (MATE_GROW); where the mates' weights sum below
+    1 the average is completed by the nearest mates' light, a Gaussian-weighted mean as wide as
+    needed to reach them, and the filled pixels (weights below a half) are reported."""
+    import cv2
+
+    shape = frames[0].shape[:2]
+    base = background.astype(np.float32) + 1.0
+    total = np.zeros(shape, np.float32)
+    acc = np.zeros(base.shape, np.float32)
+    yy, xx = np.mgrid[:shape[0], :shape[1]].astype(np.float32)
+    lo, hi = MATE_GROW
+    widest = 1.0
+    for f, (x, y, r) in zip(frames[:MAX_MATES], circles[:MAX_MATES], strict=False):
+        d = np.sqrt((xx - x) ** 2 + (yy - y) ** 2) / max(r, 1.0)
+        w = np.clip((d - lo) / (hi - lo), 0.0, 1.0)
+        w = w * w * (3 - 2 * w)  # smoothstep: no kink at either end
+        acc += w[..., None] * np.log((f.astype(np.float32) + 1.0) / base)
+        total += w
+        widest = max(widest, hi * r)
+    gain = acc / np.maximum(total, 1e-6)[..., None]
+    have = np.minimum(total, 1.0)
+    if (have < 1.0).any():  # complete from around: the narrowest mean that reaches the pixel
+        near = np.zeros_like(gain)
+        left, sigma = have < 1.0, 2.0
+        while left.any():
+            weight = cv2.GaussianBlur(total, (0, 0), sigma)
+            take = left & (weight >= 0.05) if sigma < 2 * widest else left
+            near[take] = cv2.GaussianBlur(acc, (0, 0), sigma)[take] / np.maximum(
+                weight[take], 1e-6)[:, None]
+            left &= ~take
+            sigma *= 2
+        gain = have[..., None] * gain + (1.0 - have[..., None]) * near
+    ref = base * np.exp(gain) - 1.0
+    return np.clip(ref, 0, 255).round().astype(np.uint8), total < 0.5
+
+
+def share_filled(circle: tuple[float, float, float], filled: np.ndarray) -> float:
+    """The share of `circle`'s disc where the mates' background was filled in (a circle there
+    is the fill's, not the press's); 1 for a circle off the frame."""
+    own = _disc_box(*circle, filled.shape)
+    if own is None:
+        return 1.0
+    box, disc = own
+    return float(filled[box][disc].mean())

@@ -686,6 +686,89 @@ def _retry_detection(img: np.ndarray, bg: np.ndarray, ball_px: float,
     return found
 
 
+def _detect_against_mates(record: list[dict[str, Any]], frames: dict[str, np.ndarray],
+                          bg: np.ndarray, balls: dict[str, float],
+                          notes: dict[str, list[str]]) -> list[str]:
+    """Detected circles of presses taken under another light than the background, checked (and
+    found when missing) against presses of their own light; a warning naming those presses.
+
+    Such a press shows that light's change over the whole gel (DIGIT 0016 and 0017), where its
+    contact can drown (rotated, 2.5 times the size, with moved markers and JPEG; or in grey)
+    and noise can pass for one (a simulated frame without contact under another layout passed
+    the check). The presses that share its light (`background.light_mates`) stand in for the
+    background, each with its own contact filled in (`background.mates_background`). A circle
+    holds when it passes the check against them, its rim stands out (`sphere.RING_Z_MIN`), and
+    less than half of it lies where a mate's contact was filled. A circle that does not hold is
+    detected again there, and the press dropped when that fails too."""
+    from .background import light_mates, mates_background, share_filled
+    from .imprint import ring_contrast
+    from .sphere import RING_Z_MIN, change_map, default_sigma
+
+    groups = light_mates(frames, bg)
+    if not groups:
+        return []
+    rows = {r["id"]: r for r in record}
+    placed = {k: (r["circle"]["x"], r["circle"]["y"], r["circle"]["r"]) for k, r in rows.items()
+              if r["status"] != "dropped"}
+
+    def against(pid: str, pool: dict[str, tuple[float, float, float]]) -> Any:
+        """The press's mates in `pool`, and a test of a circle against their background."""
+        mates = [k for k in groups[pid] if k in pool and k != pid]
+        if not mates:
+            return mates, None
+        img, ball = frames[pid], balls[pid]
+        ref, filled = mates_background([frames[k] for k in mates], [pool[k] for k in mates],
+                                       bg)
+        m = change_map(img, ref, default_sigma(img.shape[:2]), markers=True)
+
+        def holds(c: tuple[float, float, float] | None) -> bool:
+            return c is not None and not circle_doubts(c, img, ref, ball, m) and share_filled(
+                c, filled) < 0.5 and ring_contrast(m, c) >= RING_Z_MIN
+
+        return mates, (ref, holds)
+
+    checked = [k for k in groups if rows[k]["source"] == "detected"]
+    trusted = dict(placed)  # mates whose circles hold (labels always do)
+    for _ in range(3):  # a detected circle that does not hold leaves the pool, and the rest again
+        failed = [k for k in checked if k in trusted and (t := against(k, trusted)[1])
+                  and not t[1](trusted[k])]
+        if not failed or len(failed) == sum(k in trusted for k in checked):
+            break  # none failed, or all did: nothing left to hold them against
+        for k in failed:
+            del trusted[k]
+    for pid in checked:
+        if pid in trusted:
+            continue
+        row = rows[pid]
+        mates, test = against(pid, trusted)
+        if test is None:
+            continue
+        found = detect_circle(frames[pid], test[0], ball_px=balls[pid])
+        who = f"press{'es' if len(mates) > 1 else ''} {', '.join(mates)}"
+        if not test[1](found):
+            if row["status"] != "dropped":
+                row.update(status="dropped", against_presses=mates, reasons=[
+                    f"its circle does not show against {who} of its own light, nor another"])
+            continue
+        was = "; ".join(row["reasons"]) if row["status"] == "dropped" else \
+            "its circle does not show against them"
+        row.update(status="used", reasons=[], against_presses=mates, against_background=was,
+                   first_detected=row["detected"], detected=_circle(found),
+                   circle=_circle(found))
+        if row["label"] is not None:
+            row.update(label_agreement((row["label"]["x"], row["label"]["y"],
+                                        row["label"]["r"]), found, balls[pid]))
+        notes[pid].append(f"press {pid}: against the background, {was}; against {who} of its "
+                          f"light (contacts filled in) it shows ({found[0]:.1f}, "
+                          f"{found[1]:.1f}) r {found[2]:.1f} px")
+    ids = sorted(groups)
+    return [f"press{'es' if len(ids) > 1 else ''} {', '.join(ids)} lie far from the background "
+            "and near one another: taken under another light? Their detected circles are checked "
+            "against one another (contacts filled in), but the mapping learns their change from "
+            "the background, light and all; record a background under each light and calibrate "
+            "each light's presses apart"]
+
+
 def _circle(c: tuple[float, float, float] | None) -> dict[str, float | None] | None:
     return None if c is None else {"x": _num(c[0]), "y": _num(c[1]), "r": _num(c[2])}
 
@@ -769,8 +852,8 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
         bg, bg_how, frames, small_px)
     warnings.extend(bg_notes)
     record: list[dict[str, Any]] = []
+    notes: dict[str, list[str]] = {}  # each press's warnings, in entry order at the end
     for e, img in zip(entries, frames, strict=True):
-        truth = root / e.truth if e.truth else None
         ball = ball_radius_px(float(e.ball_radius_mm), scale)
         label = None if e.circle is None else (e.circle.x, e.circle.y, e.circle.r)
         found = detect_circle(img, bg, ball_px=ball) if label is None or circles == "detect" \
@@ -779,6 +862,7 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
             else (found, "detected")
         row: dict[str, Any] = {"id": e.id, "source": source, "label": _circle(label),
                                "detected": _circle(found), "circle": _circle(use)}
+        notes[e.id] = []
         doubts = [] if use is None else circle_doubts(use, img, bg, ball)
         if source == "detected" and use is not None and doubts:
             # retry from the imprint as the colour change shows it (the strongest change can be
@@ -788,9 +872,9 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
             if again is not None:
                 row.update(detected=_circle(again), circle=_circle(again),
                            retried_after=doubts, first_detected=_circle(use))
-                warnings.append(f"press {e.id}: first detected circle implausible "
-                                f"({'; '.join(doubts)}); detected again from the imprint: "
-                                f"({again[0]:.1f}, {again[1]:.1f}) r {again[2]:.1f} px")
+                notes[e.id].append(f"press {e.id}: first detected circle implausible "
+                                   f"({'; '.join(doubts)}); detected again from the imprint: "
+                                   f"({again[0]:.1f}, {again[1]:.1f}) r {again[2]:.1f} px")
                 use, found, doubts = again, again, []
         if label is not None and found is not None:
             row.update(label_agreement(label, found, ball))
@@ -801,14 +885,22 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
                                                   for d in doubts])
         else:
             row.update(status="doubted" if doubts else "used", reasons=doubts)
-            presses.append(Press(e.id, img, *use, float(e.ball_radius_mm), source, truth))
+        record.append(row)
+    light_notes = _detect_against_mates(record, by_id, bg, {
+        e.id: ball_radius_px(float(e.ball_radius_mm), scale) for e in entries}, notes)
+    for e, img, row in zip(entries, frames, record, strict=True):
+        warnings.extend(notes[e.id])
         if row["status"] == "dropped":
             lost.append(e.id)
             warnings.append(f"press {e.id} dropped: {'; '.join(row['reasons'])}")
-        elif row["status"] == "doubted":
-            warnings.append(f"press {e.id}: labelled circle doubted ({'; '.join(doubts)}); "
-                            "used as labelled")
-        record.append(row)
+            continue
+        if row["status"] == "doubted":
+            warnings.append(f"press {e.id}: labelled circle doubted "
+                            f"({'; '.join(row['reasons'])}); used as labelled")
+        c = row["circle"]
+        presses.append(Press(e.id, img, c["x"], c["y"], c["r"], float(e.ball_radius_mm),
+                             row["source"], root / e.truth if e.truth else None))
+    warnings.extend(light_notes)
     if estimate_background:
         bg_notes = _crowded_warning(shape, presses, len(frames))
         warnings.extend(bg_notes)

@@ -201,6 +201,8 @@ def _tile_text(rec: dict[str, Any], held: set[str]) -> str:
         lines += textwrap.wrap(why, 30)
     if rec.get("retried_after"):
         lines.append("detected again")
+    if rec.get("against_presses"):  # under another light: held against presses of its own
+        lines.append(f"vs {', '.join(rec['against_presses'][:2])}")
     return "\n".join(lines[:6])
 
 
