@@ -70,6 +70,10 @@ def calibrate(
 ) -> None:
     """Fit a colour-to-gradient calibration from ball presses, score held-out presses.
 
+    Every circle is checked against its press's colour change (an implausible detected circle
+    drops its press), presses taken under another light than the background against one
+    another; the report's circles.png shows every press with its circle.
+
     Example: [bold]vtsbench calibrate rec --out sensor.safetensors --method mlp --holdout 6[/]
     """
     from ..depth.summary import calibrate_to_file
