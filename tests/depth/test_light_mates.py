@@ -141,7 +141,7 @@ def test_a_frame_without_contact_under_another_light_gets_no_circle(tmp_path, ge
             assert math.hypot(c["x"] - x, c["y"] - y) < 10 and abs(c["r"] / r - 1) < 0.15, (k, c)
     used = [k for k in exact if k >= "p6" and rows[k]["status"] != "dropped"]
     assert len(used) >= 3, rows
-    named = [w for w in warns if "taken under another light?" in w]
+    named = [w for w in warns if "taken under another light or exposure?" in w]
     assert len(named) == 1 and "p6" in named[0] and "p1," not in named[0], warns
     assert not [k for k in exact if k < "p6" and rows[k].get("against_presses")]
 

@@ -763,7 +763,7 @@ def _detect_against_mates(record: list[dict[str, Any]], frames: dict[str, np.nda
                           f"{found[1]:.1f}) r {found[2]:.1f} px")
     ids = sorted(groups)
     return [f"press{'es' if len(ids) > 1 else ''} {', '.join(ids)} lie far from the background "
-            "and near one another: taken under another light? Their detected circles are checked "
+            "and near one another: taken under another light or exposure? Their detected circles are checked "
             "against one another (contacts filled in), but the mapping learns their change from "
             "the background, light and all; record a background under each light and calibrate "
             "each light's presses apart"]
