@@ -696,10 +696,11 @@ def _detect_against_mates(record: list[dict[str, Any]], frames: dict[str, np.nda
     contact can drown (rotated, 2.5 times the size, with moved markers and JPEG; or in grey)
     and noise can pass for one (a simulated frame without contact under another layout passed
     the check). The presses that share its light (`background.light_mates`) stand in for the
-    background, each with its own contact filled in (`background.mates_background`). A circle
+    background, each with its own contact left out (`background.mates_background`). A circle
     holds when it passes the check against them, its rim stands out (`sphere.RING_Z_MIN`), and
-    less than half of it lies where a mate's contact was filled. A circle that does not hold is
-    detected again there, and the press dropped when that fails too."""
+    less than half of it lies where no mate was free (filled in). A detected circle that does
+    not hold leaves the mates; it is detected again against those that hold, and its press
+    dropped when that fails too. Labelled circles are not touched."""
     from .background import light_mates, mates_background, share_filled
     from .imprint import ring_contrast
     from .sphere import RING_Z_MIN, change_map, default_sigma
@@ -759,14 +760,14 @@ def _detect_against_mates(record: list[dict[str, Any]], frames: dict[str, np.nda
             row.update(label_agreement((row["label"]["x"], row["label"]["y"],
                                         row["label"]["r"]), found, balls[pid]))
         notes[pid].append(f"press {pid}: against the background, {was}; against {who} of its "
-                          f"light (contacts filled in) it shows ({found[0]:.1f}, "
+                          f"light (contacts left out) it shows ({found[0]:.1f}, "
                           f"{found[1]:.1f}) r {found[2]:.1f} px")
     ids = sorted(groups)
     return [f"press{'es' if len(ids) > 1 else ''} {', '.join(ids)} lie far from the background "
-            "and near one another: taken under another light or exposure? Their detected circles are checked "
-            "against one another (contacts filled in), but the mapping learns their change from "
-            "the background, light and all; record a background under each light and calibrate "
-            "each light's presses apart"]
+            "and near one another: taken under another light or exposure? Their detected "
+            "circles are checked against one another (contacts left out), but the mapping "
+            "learns their change from the background, light and all; record a background "
+            "under each light and calibrate each light's presses apart"]
 
 
 def _circle(c: tuple[float, float, float] | None) -> dict[str, float | None] | None:
