@@ -87,6 +87,32 @@ def test_mates_background_leaves_their_contacts_out_and_fills_between() -> None:
     assert share_filled((-50.0, 40.0, 10.0), filled) == 1.0  # off the frame
 
 
+def test_mates_background_outvotes_a_contact_whose_circle_is_not_known() -> None:
+    """Four mates, one of whose contacts has no circle (its detection failed): with three
+    others to outvote it, the background shows no trace of it; two mates alone cannot."""
+    gel, rng = _gel(4), np.random.default_rng(5)
+    bg_light, light = _light((1, 1, 1), 0.0), _light((0.8, 1.2, 1.0), -0.3)
+    truth = gel * light
+    yy, xx = np.mgrid[:SIZE[0], :SIZE[1]]
+    circles = [(60.0, 60.0, 25.0), (250.0, 60.0, 25.0), (60.0, 180.0, 25.0), (160.0, 120.0, 30.0)]
+    frames = []
+    for x, y, r in circles:
+        dent = ((xx - x) ** 2 + (yy - y) ** 2 <= r * r)[..., None] * np.float32([50, -45, 35])
+        frames.append(np.clip(truth + dent + rng.normal(0, 1.0, truth.shape), 0, 255)
+                      .astype(np.uint8))
+    bg = np.clip(gel * bg_light, 0, 255).astype(np.uint8)
+    ref, filled = mates_background(frames, [*circles[:3], None], bg)
+    assert not filled.any()
+    inside = (xx - 160) ** 2 + (yy - 120) ** 2 <= 30 ** 2
+    err = np.abs(ref.astype(np.float32) - truth).sum(-1)
+    assert float(np.median(err[inside])) < 6.0 and float(np.percentile(err[inside], 95)) < 15.0
+    # two mates, the unknown contact's among them: half of it stays (a reason to leave such a
+    # mate out when fewer than three)
+    ref2, _ = mates_background([frames[0], frames[3]], [circles[0], None], bg)
+    err2 = np.abs(ref2.astype(np.float32) - truth).sum(-1)
+    assert float(np.median(err2[inside])) > 30.0
+
+
 def _two_lights(folder: Path, gel: str) -> tuple[Path, dict[str, tuple[float, float, float]]]:
     """Six presses under the simulator's three coloured zones with their background, four
     more and a frame without contact under red, green, blue and white side lights (the same

@@ -179,38 +179,48 @@ def light_mates(frames: dict[str, np.ndarray], background: np.ndarray
 
 
 def mates_background(frames: Sequence[np.ndarray],
-                     circles: Sequence[tuple[float, float, float]], background: np.ndarray
-                     ) -> tuple[np.ndarray, np.ndarray]:
+                     circles: Sequence[tuple[float, float, float] | None],
+                     background: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A background for a press from presses under its light, and where it is filled in (bool).
 
     Each mate's light relative to the background (the log of their ratio, which a change of
     light alone leaves smooth: the gel's own pattern and markers divide out) is averaged with
-    weights that leave out its contact smoothly (MATE_GROW); where the mates' weights sum below
-    1 the average is completed by the nearest mates' light, a Gaussian-weighted mean as wide as
-    needed to reach them, and the filled pixels (weights below a half) are reported."""
+    weights that leave out its contact smoothly (MATE_GROW; a mate whose circle is None counts
+    everywhere). With three mates or more, a mate that departs far from the others at a pixel
+    (a contact whose circle is unknown) counts less there, smoothly (`_robust`). Where the
+    mates' contact weights sum below 1 the average is completed by the nearest mates' light,
+    a Gaussian-weighted mean as wide as needed to reach them; pixels where they sum below a
+    half are reported as filled."""
     import cv2
 
     shape = frames[0].shape[:2]
     base = background.astype(np.float32) + 1.0
-    total = np.zeros(shape, np.float32)
-    acc = np.zeros(base.shape, np.float32)
     yy, xx = np.mgrid[:shape[0], :shape[1]].astype(np.float32)
     lo, hi = MATE_GROW
-    widest = 1.0
-    for f, (x, y, r) in zip(frames[:MAX_MATES], circles[:MAX_MATES], strict=False):
-        d = np.sqrt((xx - x) ** 2 + (yy - y) ** 2) / max(r, 1.0)
-        w = np.clip((d - lo) / (hi - lo), 0.0, 1.0)
-        w = w * w * (3 - 2 * w)  # smoothstep: no kink at either end
-        acc += w[..., None] * np.log((f.astype(np.float32) + 1.0) / base)
-        total += w
+    widest, gains, weights = 1.0, [], []
+    for f, c in zip(frames[:MAX_MATES], circles[:MAX_MATES], strict=False):
+        gains.append(np.log((f.astype(np.float32) + 1.0) / base))
+        if c is None:
+            weights.append(np.ones(shape, np.float32))
+            continue
+        x, y, r = c
+        w = np.clip((np.sqrt((xx - x) ** 2 + (yy - y) ** 2) / max(r, 1.0) - lo) / (hi - lo),
+                    0.0, 1.0)
+        weights.append(w * w * (3 - 2 * w))  # smoothstep: no kink at either end
         widest = max(widest, hi * r)
-    gain = acc / np.maximum(total, 1e-6)[..., None]
+    g, w = np.stack(gains), np.stack(weights)
+    total = w.sum(0)
+    if len(gains) >= 3:
+        w = w * _robust(g, w)
+    acc = (w[..., None] * g).sum(0)
+    gain = acc / np.maximum(w.sum(0), 1e-6)[..., None]
     have = np.minimum(total, 1.0)
     if (have < 1.0).any():  # complete from around: the narrowest mean that reaches the pixel
         near = np.zeros_like(gain)
         left, sigma = have < 1.0, 2.0
+        wsum = w.sum(0)
         while left.any():
-            weight = cv2.GaussianBlur(total, (0, 0), sigma)
+            weight = cv2.GaussianBlur(wsum, (0, 0), sigma)
             take = left & (weight >= 0.05) if sigma < 2 * widest else left
             near[take] = cv2.GaussianBlur(acc, (0, 0), sigma)[take] / np.maximum(
                 weight[take], 1e-6)[:, None]
@@ -219,6 +229,21 @@ def mates_background(frames: Sequence[np.ndarray],
         gain = have[..., None] * gain + (1.0 - have[..., None]) * near
     ref = base * np.exp(gain) - 1.0
     return np.clip(ref, 0, 255).round().astype(np.uint8), total < 0.5
+
+
+def _robust(g: np.ndarray, w: np.ndarray, rounds: int = 2) -> np.ndarray:
+    """Per mate and pixel, a factor in (0, 1] that falls smoothly (1 / (1 + (d / tau)^2)) as the
+    mate departs from the others' weighted mean there by d (summed over channels); tau is 3
+    times the typical departure over the frame, so noise and texture keep their weight and a
+    contact loses it."""
+    k = np.ones_like(w)
+    for _ in range(rounds):
+        ww = w * k
+        mean = (ww[..., None] * g).sum(0) / np.maximum(ww.sum(0), 1e-6)[..., None]
+        d = np.abs(g - mean).sum(-1)
+        tau = 3.0 * max(float(np.median(d[w > 0.5])) if (w > 0.5).any() else 0.0, 1e-3)
+        k = 1.0 / (1.0 + (d / tau) ** 2)
+    return k
 
 
 def share_filled(circle: tuple[float, float, float], filled: np.ndarray) -> float:

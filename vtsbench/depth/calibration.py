@@ -696,11 +696,12 @@ def _detect_against_mates(record: list[dict[str, Any]], frames: dict[str, np.nda
     contact can drown (rotated, 2.5 times the size, with moved markers and JPEG; or in grey)
     and noise can pass for one (a simulated frame without contact under another layout passed
     the check). The presses that share its light (`background.light_mates`) stand in for the
-    background, each with its own contact left out (`background.mates_background`). A circle
-    holds when it passes the check against them, its rim stands out (`sphere.RING_Z_MIN`), and
-    less than half of it lies where no mate was free (filled in). A detected circle that does
-    not hold leaves the mates; it is detected again against those that hold, and its press
-    dropped when that fails too. Labelled circles are not touched."""
+    background, each with its own contact left out (`background.mates_background`; a contact
+    not known is outvoted by three mates or more, and left out with fewer). A circle holds when
+    it passes the check against them, its rim stands out (`sphere.RING_Z_MIN`), and less than
+    half of it lies where no mate was free (filled in). A detected circle that does not hold
+    is no longer trusted (its contact counts as not known); its press is detected again against
+    the mates, and dropped when that fails too. Labelled circles are not touched."""
     from .background import light_mates, mates_background, share_filled
     from .imprint import ring_contrast
     from .sphere import RING_Z_MIN, change_map, default_sigma
@@ -709,17 +710,24 @@ def _detect_against_mates(record: list[dict[str, Any]], frames: dict[str, np.nda
     if not groups:
         return []
     rows = {r["id"]: r for r in record}
-    placed = {k: (r["circle"]["x"], r["circle"]["y"], r["circle"]["r"]) for k, r in rows.items()
-              if r["status"] != "dropped"}
+    # each press's circle as far as it is trusted (labels, and detected circles that hold);
+    # None where its contact is not known
+    trusted: dict[str, tuple[float, float, float] | None] = {
+        k: None if r["status"] == "dropped" else (r["circle"]["x"], r["circle"]["y"],
+                                                    r["circle"]["r"]) for k, r in rows.items()}
 
-    def against(pid: str, pool: dict[str, tuple[float, float, float]]) -> Any:
-        """The press's mates in `pool`, and a test of a circle against their background."""
-        mates = [k for k in groups[pid] if k in pool and k != pid]
+    def against(pid: str) -> Any:
+        """The press's mates, and a test of a circle against their background (None when
+        there is nothing to hold it against: fewer than three mates, none with a known
+        contact)."""
+        mates = groups[pid]
+        if len(mates) < 3:  # too few to outvote a contact whose circle is not known
+            mates = [k for k in mates if trusted[k] is not None]
         if not mates:
             return mates, None
         img, ball = frames[pid], balls[pid]
-        ref, filled = mates_background([frames[k] for k in mates], [pool[k] for k in mates],
-                                       bg)
+        ref, filled = mates_background([frames[k] for k in mates],
+                                       [trusted[k] for k in mates], bg)
         m = change_map(img, ref, default_sigma(img.shape[:2]), markers=True)
 
         def holds(c: tuple[float, float, float] | None) -> bool:
@@ -729,39 +737,53 @@ def _detect_against_mates(record: list[dict[str, Any]], frames: dict[str, np.nda
         return mates, (ref, holds)
 
     checked = [k for k in groups if rows[k]["source"] == "detected"]
-    trusted = dict(placed)  # mates whose circles hold (labels always do)
-    for _ in range(3):  # a detected circle that does not hold leaves the pool, and the rest again
-        failed = [k for k in checked if k in trusted and (t := against(k, trusted)[1])
-                  and not t[1](trusted[k])]
-        if not failed or len(failed) == sum(k in trusted for k in checked):
-            break  # none failed, or all did: nothing left to hold them against
-        for k in failed:
-            del trusted[k]
+    found: dict[str, tuple[float, float, float]] = {}  # circles found against the mates
+    failed: set[str] = set()  # failed a check against mates: not detected there again
+
+    def verify() -> bool:
+        """Each trusted detected circle against the others as they stand; False if none
+        failed."""
+        out = [k for k in checked if trusted[k] is not None and (t := against(k)[1])
+               and not t[1](trusted[k])]
+        for k in out:
+            trusted[k] = None
+        failed.update(k for k in out if k in found)
+        return bool(out)
+
+    for _ in range(4):  # until nothing changes: circles that fail leave, contacts found join
+        changed = verify()
+        for k in checked:
+            if trusted[k] is not None or k in failed:
+                continue
+            test = against(k)[1]
+            c = None if test is None else detect_circle(frames[k], test[0], ball_px=balls[k])
+            if test is not None and test[1](c):
+                trusted[k] = found[k] = c
+                changed = True
+        if not changed:
+            break
+    verify()
     for pid in checked:
-        if pid in trusted:
-            continue
-        row = rows[pid]
-        mates, test = against(pid, trusted)
-        if test is None:
-            continue
-        found = detect_circle(frames[pid], test[0], ball_px=balls[pid])
+        row, c = rows[pid], trusted[pid]
+        mates = against(pid)[0]
         who = f"press{'es' if len(mates) > 1 else ''} {', '.join(mates)}"
-        if not test[1](found):
-            if row["status"] != "dropped":
+        if c is None:
+            if row["status"] != "dropped" and mates:
                 row.update(status="dropped", against_presses=mates, reasons=[
                     f"its circle does not show against {who} of its own light, nor another"])
             continue
+        if pid not in found:
+            continue  # its circle against the background holds against the mates too
         was = "; ".join(row["reasons"]) if row["status"] == "dropped" else \
             "its circle does not show against them"
         row.update(status="used", reasons=[], against_presses=mates, against_background=was,
-                   first_detected=row["detected"], detected=_circle(found),
-                   circle=_circle(found))
+                   first_detected=row["detected"], detected=_circle(c), circle=_circle(c))
         if row["label"] is not None:
             row.update(label_agreement((row["label"]["x"], row["label"]["y"],
-                                        row["label"]["r"]), found, balls[pid]))
+                                        row["label"]["r"]), c, balls[pid]))
         notes[pid].append(f"press {pid}: against the background, {was}; against {who} of its "
-                          f"light (contacts left out) it shows ({found[0]:.1f}, "
-                          f"{found[1]:.1f}) r {found[2]:.1f} px")
+                          f"light (contacts left out) it shows ({c[0]:.1f}, {c[1]:.1f}) r "
+                          f"{c[2]:.1f} px")
     ids = sorted(groups)
     return [f"press{'es' if len(ids) > 1 else ''} {', '.join(ids)} lie far from the background "
             "and near one another: taken under another light or exposure? Their detected "
