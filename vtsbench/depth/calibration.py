@@ -716,15 +716,24 @@ def _detect_against_mates(record: list[dict[str, Any]], frames: dict[str, np.nda
         k: None if r["status"] == "dropped" else (r["circle"]["x"], r["circle"]["y"],
                                                     r["circle"]["r"]) for k, r in rows.items()}
 
-    def against(pid: str) -> Any:
-        """The press's mates, and a test of a circle against their background (None when
-        there is nothing to hold it against: fewer than three mates, none with a known
-        contact)."""
+    def mates_of(pid: str) -> list[str]:
+        """The presses that make its background: all of its light, or with fewer than three
+        (too few to outvote a contact whose circle is not known) those with a known contact."""
         mates = groups[pid]
-        if len(mates) < 3:  # too few to outvote a contact whose circle is not known
-            mates = [k for k in mates if trusted[k] is not None]
-        if not mates:
-            return mates, None
+        return mates if len(mates) >= 3 else [k for k in mates if trusted[k] is not None]
+
+    made: dict[str, Any] = {}  # each press's last test, kept while its mates' circles stand
+
+    def against(pid: str) -> Any:
+        """That background, and a test of a circle against it (None when there is nothing to
+        hold it against)."""
+        mates = mates_of(pid)
+        key = tuple((k, trusted[k]) for k in mates)
+        if pid not in made or made[pid][0] != key:
+            made[pid] = key, _mates_test(pid, mates) if mates else None
+        return made[pid][1]
+
+    def _mates_test(pid: str, mates: list[str]) -> Any:
         img, ball = frames[pid], balls[pid]
         ref, filled = mates_background([frames[k] for k in mates],
                                        [trusted[k] for k in mates], bg)
@@ -734,7 +743,7 @@ def _detect_against_mates(record: list[dict[str, Any]], frames: dict[str, np.nda
             return c is not None and not circle_doubts(c, img, ref, ball, m) and share_filled(
                 c, filled) < 0.5 and ring_contrast(m, c) >= RING_Z_MIN
 
-        return mates, (ref, holds)
+        return ref, holds
 
     checked = [k for k in groups if rows[k]["source"] == "detected"]
     found: dict[str, tuple[float, float, float]] = {}  # circles found against the mates
@@ -743,7 +752,7 @@ def _detect_against_mates(record: list[dict[str, Any]], frames: dict[str, np.nda
     def verify() -> bool:
         """Each trusted detected circle against the others as they stand; False if none
         failed."""
-        out = [k for k in checked if trusted[k] is not None and (t := against(k)[1])
+        out = [k for k in checked if trusted[k] is not None and (t := against(k))
                and not t[1](trusted[k])]
         for k in out:
             trusted[k] = None
@@ -755,17 +764,18 @@ def _detect_against_mates(record: list[dict[str, Any]], frames: dict[str, np.nda
         for k in checked:
             if trusted[k] is not None or k in failed:
                 continue
-            test = against(k)[1]
+            test = against(k)
             c = None if test is None else detect_circle(frames[k], test[0], ball_px=balls[k])
             if test is not None and test[1](c):
                 trusted[k] = found[k] = c
                 changed = True
         if not changed:
             break
-    verify()
+    else:
+        verify()  # the rounds ran out while still changing: the last word is the check
     for pid in checked:
         row, c = rows[pid], trusted[pid]
-        mates = against(pid)[0]
+        mates = mates_of(pid)
         who = f"press{'es' if len(mates) > 1 else ''} {', '.join(mates)}"
         if c is None:
             if row["status"] != "dropped" and mates:
