@@ -41,6 +41,15 @@ def _light(gains: tuple[float, float, float], tilt: float) -> np.ndarray:
     return 100.0 * np.asarray(gains, np.float32) * (1 + tilt * x)
 
 
+def _pressed(truth: np.ndarray, circles: list, colour: tuple[float, float, float],
+             rng: np.random.Generator) -> list[np.ndarray]:
+    """A frame of `truth` per circle, the disc changed by `colour` (DN) and noise added."""
+    yy, xx = np.mgrid[:SIZE[0], :SIZE[1]]
+    return [np.clip(truth + ((xx - x) ** 2 + (yy - y) ** 2 <= r * r)[..., None]
+                    * np.float32(colour) + rng.normal(0, 1.0, truth.shape), 0, 255)
+            .astype(np.uint8) for x, y, r in circles]
+
+
 def test_light_mates_groups_the_presses_of_another_light() -> None:
     gel, rng = _gel(0), np.random.default_rng(1)
     one, two = _light((1, 1, 1), 0.2), _light((1.4, 0.8, 1.1), -0.3)
@@ -68,12 +77,7 @@ def test_mates_background_leaves_their_contacts_out_and_fills_between() -> None:
     bg_light, light = _light((1, 1, 1), 0.0), _light((1.3, 0.9, 0.8), 0.4)
     truth = gel * light
     circles = [(140.0, 120.0, 30.0), (180.0, 120.0, 30.0)]
-    yy, xx = np.mgrid[:SIZE[0], :SIZE[1]]
-    frames = []
-    for x, y, r in circles:
-        dent = ((xx - x) ** 2 + (yy - y) ** 2 <= r * r)[..., None] * np.float32([60, -40, 30])
-        frames.append(np.clip(truth + dent + rng.normal(0, 1.0, truth.shape), 0, 255)
-                      .astype(np.uint8))
+    frames = _pressed(truth, circles, (60, -40, 30), rng)
     bg = np.clip(gel * bg_light, 0, 255).astype(np.uint8)
     ref, filled = mates_background(frames, circles, bg)
     err = np.abs(ref.astype(np.float32) - truth)
@@ -95,11 +99,7 @@ def test_mates_background_outvotes_a_contact_whose_circle_is_not_known() -> None
     truth = gel * light
     yy, xx = np.mgrid[:SIZE[0], :SIZE[1]]
     circles = [(60.0, 60.0, 25.0), (250.0, 60.0, 25.0), (60.0, 180.0, 25.0), (160.0, 120.0, 30.0)]
-    frames = []
-    for x, y, r in circles:
-        dent = ((xx - x) ** 2 + (yy - y) ** 2 <= r * r)[..., None] * np.float32([50, -45, 35])
-        frames.append(np.clip(truth + dent + rng.normal(0, 1.0, truth.shape), 0, 255)
-                      .astype(np.uint8))
+    frames = _pressed(truth, circles, (50, -45, 35), rng)
     bg = np.clip(gel * bg_light, 0, 255).astype(np.uint8)
     ref, filled = mates_background(frames, [*circles[:3], None], bg)
     assert not filled.any()
