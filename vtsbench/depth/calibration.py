@@ -446,8 +446,10 @@ class CalibrationRun:
 
     @property
     def retried(self) -> list[str]:
-        """Presses whose first detected circle failed its check and was detected again."""
-        return [p["id"] for p in self.presses if p.get("retried_after")]
+        """Presses whose first detected circle failed its check and was detected again (from
+        the imprint, or against presses of their own light)."""
+        return [p["id"] for p in self.presses
+                if p.get("retried_after") or p.get("against_background")]
 
     @property
     def shown(self) -> list[HeldOut]:
