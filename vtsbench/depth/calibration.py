@@ -432,8 +432,8 @@ class CalibrationRun:
     presses: list[dict[str, Any]] = field(default_factory=list)
     #: Every press frame by id, used or dropped (the report's contact sheet draws them).
     frames: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
-    #: What is wrong with the background, if anything (also among the warnings; the contact
-    #: sheet shows it under its title).
+    #: What is wrong with the background, if anything, or with the light of some presses
+    #: against it (also among the warnings; the contact sheet shows it under its title).
     background_notes: list[str] = field(default_factory=list)
 
     @property
@@ -946,7 +946,7 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
              "background": bg_how, "lost": lost, "n_entries": len(entries), "presses": record,
              "ball_radius_mm": radii[0] if radii else float(entries[0].ball_radius_mm),
              "frames": by_id,
-             "background_notes": bg_notes,
+             "background_notes": bg_notes + light_notes,
              "sources": {e.id: root / e.source.path for e in entries}}
     if len(radii) > 1:
         warnings.append(f"presses of several ball radii ({radii} mm); the file records "
