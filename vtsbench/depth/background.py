@@ -233,7 +233,7 @@ def mates_background(frames: Sequence[np.ndarray],
 
 def _robust(g: np.ndarray, w: np.ndarray, rounds: int = 2) -> np.ndarray:
     """Per mate and pixel, a factor in (0, 1] that falls smoothly (1 / (1 + (d / tau)^2)) as the
-    mate departs from the others' weighted mean there by d (summed over channels); tau is 3
+    mate departs from the mates' weighted mean there by d (summed over channels); tau is 3
     times the typical departure over the frame, so noise and texture keep their weight and a
     contact loses it."""
     k = np.ones_like(w)
