@@ -126,13 +126,17 @@ def own_contact(background: np.ndarray, frames: Sequence[np.ndarray], ball_px: f
 SWAP_GAIN, SWAP_MIN_DN = 0.5, 6.0
 
 
+def _distance(a: np.ndarray, b: np.ndarray, step: int = 4) -> float:
+    """The median over pixels of |a - b| summed over channels (DN), on every `step`th pixel."""
+    return float(np.median(np.abs(a[::step, ::step].astype(np.int16) - b[::step, ::step])
+                           .sum(-1)))
+
+
 def channels_reversed(background: np.ndarray, med: np.ndarray) -> tuple[float, float] | None:
     """(as given, reversed): how far the background lies from the presses' median `med` as
     given and with its channels reversed (DN, see SWAP_GAIN), when reversed fits them; None
     otherwise."""
-    b, m = background.astype(np.float32), med.astype(np.float32)
-    given = float(np.median(np.abs(b - m).sum(-1)))
-    rev = float(np.median(np.abs(b[..., ::-1] - m).sum(-1)))
+    given, rev = _distance(background, med, 1), _distance(background[..., ::-1], med, 1)
     return (given, rev) if given >= SWAP_MIN_DN and rev <= SWAP_GAIN * given else None
 
 
@@ -151,11 +155,6 @@ LIGHT_MATE_RATIO = 0.5
 MATE_GROW = (1.2, 1.6)
 #: The nearest mates that make a press's background (bounded memory and time).
 MAX_MATES = 8
-
-
-def _distance(a: np.ndarray, b: np.ndarray) -> float:
-    """The median over pixels of |a - b| summed over channels (DN), on every 4th pixel."""
-    return float(np.median(np.abs(a[::4, ::4].astype(np.int16) - b[::4, ::4]).sum(-1)))
 
 
 def light_mates(frames: dict[str, np.ndarray], background: np.ndarray

@@ -632,8 +632,8 @@ def _label_layout_hint(record: list[dict[str, Any]], frames: dict[str, np.ndarra
     maps = {r["id"]: change_map(frames[r["id"]], bg, default_sigma(shape), markers=True)
             for r in rows}
     for name, move in LABEL_LAYOUTS.items():
-        passed = sum(not circle_doubts(move(r["label"]["x"], r["label"]["y"], r["label"]["r"],
-                                            h, w), frames[r["id"]], bg, ball_px, maps[r["id"]])
+        passed = sum(not circle_doubts(move(*_xyr(r["label"]), h, w), frames[r["id"]], bg,
+                                       ball_px, maps[r["id"]])
                      for r in rows)
         if passed >= max(LAYOUT_PASS * len(rows), len(rows) - len(doubted) + 3):
             return [f"{len(doubted)} of {len(rows)} labelled circles do not fit their presses' "
@@ -715,8 +715,7 @@ def _detect_against_mates(record: list[dict[str, Any]], frames: dict[str, np.nda
     # each press's circle as far as it is trusted (labels, and detected circles that hold);
     # None where its contact is not known
     trusted: dict[str, tuple[float, float, float] | None] = {
-        k: None if r["status"] == "dropped" else (r["circle"]["x"], r["circle"]["y"],
-                                                    r["circle"]["r"]) for k, r in rows.items()}
+        k: None if r["status"] == "dropped" else _xyr(r["circle"]) for k, r in rows.items()}
 
     def mates_of(pid: str) -> list[str]:
         """The presses that make its background: all of its light, or with fewer than three
@@ -791,8 +790,7 @@ def _detect_against_mates(record: list[dict[str, Any]], frames: dict[str, np.nda
         row.update(status="used", reasons=[], against_presses=mates, against_background=was,
                    first_detected=row["detected"], detected=_circle(c), circle=_circle(c))
         if row["label"] is not None:
-            row.update(label_agreement((row["label"]["x"], row["label"]["y"],
-                                        row["label"]["r"]), c, balls[pid]))
+            row.update(label_agreement(_xyr(row["label"]), c, balls[pid]))
         notes[pid].append(f"press {pid}: against the background, {was}; against {who} of its "
                           f"light (contacts left out) it shows ({c[0]:.1f}, {c[1]:.1f}) r "
                           f"{c[2]:.1f} px")
@@ -806,6 +804,11 @@ def _detect_against_mates(record: list[dict[str, Any]], frames: dict[str, np.nda
 
 def _circle(c: tuple[float, float, float] | None) -> dict[str, float | None] | None:
     return None if c is None else {"x": _num(c[0]), "y": _num(c[1]), "r": _num(c[2])}
+
+
+def _xyr(c: dict[str, Any]) -> tuple[float, float, float]:
+    """A record's circle (`_circle`'s dict) as (x, y, r)."""
+    return c["x"], c["y"], c["r"]
 
 
 def label_agreement(label: tuple[float, float, float], found: tuple[float, float, float],
@@ -888,8 +891,9 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
     warnings.extend(bg_notes)
     record: list[dict[str, Any]] = []
     notes: dict[str, list[str]] = {}  # each press's warnings, in entry order at the end
+    ball_px = {e.id: ball_radius_px(float(e.ball_radius_mm), scale) for e in entries}
     for e, img in zip(entries, frames, strict=True):
-        ball = ball_radius_px(float(e.ball_radius_mm), scale)
+        ball = ball_px[e.id]
         label = None if e.circle is None else (e.circle.x, e.circle.y, e.circle.r)
         found = detect_circle(img, bg, ball_px=ball) if label is None or circles == "detect" \
             else None
@@ -921,8 +925,7 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
         else:
             row.update(status="doubted" if doubts else "used", reasons=doubts)
         record.append(row)
-    light_notes = _detect_against_mates(record, by_id, bg, {
-        e.id: ball_radius_px(float(e.ball_radius_mm), scale) for e in entries}, notes)
+    light_notes = _detect_against_mates(record, by_id, bg, ball_px, notes)
     for e, img, row in zip(entries, frames, record, strict=True):
         warnings.extend(notes[e.id])
         if row["status"] == "dropped":
@@ -932,8 +935,7 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
         if row["status"] == "doubted":
             warnings.append(f"press {e.id}: labelled circle doubted "
                             f"({'; '.join(row['reasons'])}); used as labelled")
-        c = row["circle"]
-        presses.append(Press(e.id, img, c["x"], c["y"], c["r"], float(e.ball_radius_mm),
+        presses.append(Press(e.id, img, *_xyr(row["circle"]), float(e.ball_radius_mm),
                              row["source"], root / e.truth if e.truth else None))
     warnings.extend(light_notes)
     if estimate_background:
