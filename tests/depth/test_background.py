@@ -11,17 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.fixtures.calibration import save_presses
 from vtsbench.depth.background import crowded, press_median
 from vtsbench.depth.calibration import load_presses
-from vtsbench.recordings.manifest import (
-    Circle,
-    Entry,
-    Manifest,
-    Mount,
-    Session,
-    Source,
-    save_manifest,
-)
+from vtsbench.recordings.manifest import Circle, Entry, Source
 from vtsbench.recordings.media import write_png
 from vtsbench.sim.appearance import background, sensor_appearance
 from vtsbench.sim.optics import Capture, sensor
@@ -70,9 +63,7 @@ def _presses(folder: Path, spread_px: float, n: int = 8) -> Path:
                              circle=Circle(cx, cy, r)))
     write_png(folder / "bg.png", background(app, sensor(*SIZE, MPP), Capture(gel=1),
                                             np.random.default_rng(99)))
-    save_manifest(folder, Manifest(sessions=[Session("s0", "sim", SIZE, (MPP, MPP), 30.0, None,
-                                                     mount=Mount())],
-                                   entries=entries, name="p", description="p", created_by="t"))
+    save_presses(folder, entries, SIZE, MPP)
     return folder
 
 

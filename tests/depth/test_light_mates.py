@@ -12,17 +12,11 @@ import cv2
 import numpy as np
 import pytest
 
+from tests.fixtures.calibration import save_presses
 from tests.fixtures.data import real_dir
 from vtsbench.depth.background import light_mates, mates_background, share_filled
 from vtsbench.depth.calibration import load_presses
-from vtsbench.recordings.manifest import (
-    Entry,
-    Manifest,
-    Mount,
-    Session,
-    Source,
-    save_manifest,
-)
+from vtsbench.recordings.manifest import Entry, Source
 from vtsbench.recordings.media import write_png
 
 SIZE, MPP = (240, 320), 0.05
@@ -145,9 +139,7 @@ def _two_lights(folder: Path, gel: str) -> tuple[Path, dict[str, tuple[float, fl
     write_png(folder / "p" / "nc.png", background(app, fields["sides4"], cap,
                                                   np.random.default_rng([seed, 1])))
     entries.append(Entry("nc", "press", "s0", Source("p/nc.png"), ball_radius_mm=3.0))
-    save_manifest(folder, Manifest(sessions=[Session("s0", "sim", SIZE, (MPP, MPP), 30.0, None,
-                                                     mount=Mount())],
-                                   entries=entries, name="p", description="p", created_by="t"))
+    save_presses(folder, entries, SIZE, MPP)
     return folder, exact
 
 
