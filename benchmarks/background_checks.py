@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from circles_real import REAL  # the shared real recordings
 from machine import machine  # benchmarks/machine.py: the shared machine line
 
 
@@ -30,8 +31,7 @@ def folders(tmp: Path) -> list[tuple[str, Path]]:
 
     out = [("simulated, 30 presses of 480x640", tmp / "sim")]
     simulate(out[0][1], seed=2, n_static=0, n_sequences=0, n_presses=30)
-    real = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
-    pack = real / "taxim_gelsight_ball" / "dataPack_small.npz"
+    pack = REAL / "taxim_gelsight_ball" / "dataPack_small.npz"
     if pack.is_file():
         from vtsbench.recordings.taxim import taxim_recordings
 
@@ -52,17 +52,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         sets = folders(Path(tmp))
         for name, root in sets:
-            times: dict[str, list[float]] = {"with": [], "without": []}
-            try:
-                for _ in range(args.rounds):
-                    for mode in times:
-                        cal._background_warnings = check if mode == "with" else \
-                            (lambda *a, **k: [])
-                        t0 = time.perf_counter()
-                        cal.load_presses(root)
-                        times[mode].append(time.perf_counter() - t0)
-            finally:
-                cal._background_warnings = check
+            w, wo = load_times("_background_warnings", root, {}, args.rounds)
             _, bg, setup, _ = cal.load_presses(root)
             frames = list(setup["frames"].values())
             ball = ball_radius_px(setup["ball_radius_mm"], setup["mm_per_px"])
@@ -70,7 +60,6 @@ def main() -> None:
             for _ in range(args.rounds):
                 check(bg, "", frames, ball)
             alone = (time.perf_counter() - t0) / args.rounds
-            w, wo = min(times["with"]), min(times["without"])
             print(f"| {name} | {w:.2f} | {wo:.2f} | {w / wo:.2f}x | {alone:.3f} |", flush=True)
         print("\n| presses | presses under another light | the search alone, s | load with the "
               "check against them, s | without, s | ratio |\n|---|---|---:|---:|---:|---:|")
@@ -83,14 +72,32 @@ def main() -> None:
     print(f"\nBest of {args.rounds} alternated rounds. Machine: {machine()}")
 
 
+def load_times(check: str, root: Path, opts: dict, rounds: int) -> tuple[float, float]:
+    """Best of `rounds` times (s) of `load_presses` with and without the calibration module's
+    `check` (a function returning warnings), alternated in each round."""
+    import vtsbench.depth.calibration as cal
+
+    real = getattr(cal, check)
+    times: dict[str, list[float]] = {"with": [], "without": []}
+    try:
+        for _ in range(rounds):
+            for mode in times:
+                setattr(cal, check, real if mode == "with" else (lambda *a, **k: []))
+                t0 = time.perf_counter()
+                cal.load_presses(root, **opts)
+                times[mode].append(time.perf_counter() - t0)
+    finally:
+        setattr(cal, check, real)
+    return min(times["with"]), min(times["without"])
+
+
 def digit_folder(tmp: Path) -> Path | None:
     """The DIGIT presses as a recordings folder (two of them under another light), if here."""
     from typer.testing import CliRunner
 
     from vtsbench.cli import app
 
-    src = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real" / \
-        "digit_ball_6mm"
+    src = REAL / "digit_ball_6mm"
     if not (src / "sphere.csv").is_file():
         return None
     res = CliRunner().invoke(app, ["manifest", str(src), "--pattern", "{name}.png", "--kind",
@@ -105,23 +112,12 @@ def light_row(name: str, root: Path, opts: dict, rounds: int) -> None:
     import vtsbench.depth.calibration as cal
     from vtsbench.depth.background import light_mates
 
-    check = cal._detect_against_mates
-    times: dict[str, list[float]] = {"with": [], "without": []}
-    try:
-        for _ in range(rounds):
-            for mode in times:
-                cal._detect_against_mates = check if mode == "with" else (lambda *a, **k: [])
-                t0 = time.perf_counter()
-                cal.load_presses(root, **opts)
-                times[mode].append(time.perf_counter() - t0)
-    finally:
-        cal._detect_against_mates = check
+    w, wo = load_times("_detect_against_mates", root, opts, rounds)
     _, bg, setup, _ = cal.load_presses(root, **opts)
     t0 = time.perf_counter()
     for _ in range(rounds):
         groups = light_mates(setup["frames"], bg)
     alone = (time.perf_counter() - t0) / rounds
-    w, wo = min(times["with"]), min(times["without"])
     print(f"| {name} | {', '.join(sorted(groups)) or 'none'} | {alone:.4f} | {w:.2f} | "
           f"{wo:.2f} | {w / wo:.2f}x |", flush=True)
 
