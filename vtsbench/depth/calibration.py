@@ -490,6 +490,11 @@ def _press_frame(root: Path, e: Any) -> np.ndarray:
     return read_frame(root / e.source.path, e.source.frame or 0)
 
 
+def _a_diameter(r_px: float, ball_px: float) -> bool:
+    """A circle radius too large for the ball that halved would fit it (a diameter given)."""
+    return RADIUS_TOLERANCE * ball_px < r_px <= 2 * RADIUS_TOLERANCE * ball_px
+
+
 def check_scale(scale: tuple[float, float], ball_radius_mm: float, shape: tuple[int, int],
                 radii_px: list[float], given: bool) -> None:
     """Refuse a scale that contradicts the ball and the image or the labelled circles, with one
@@ -516,8 +521,7 @@ def check_scale(scale: tuple[float, float], ball_radius_mm: float, shape: tuple[
     inv = 1.0 / scale[0]
     if scale[0] > 1.0 and 2.0 <= ball_radius_mm / inv <= math.hypot(h, w):
         hint = f"; {scale[0]:g} looks like px per mm: did you mean --mm-per-px {inv:.5g}?"
-    elif radii_px and RADIUS_TOLERANCE * ball < float(np.median(radii_px)) <= \
-            2 * RADIUS_TOLERANCE * ball:
+    elif radii_px and _a_diameter(float(np.median(radii_px)), ball):
         hint = "; or are the labels' radii diameters? (halved, half of them fit the ball)"
     raise VtsError(f"{what} {why} (check the scale and the ball radius){hint}")
 
@@ -868,8 +872,7 @@ def load_presses(folder: str | Path, *, mm_per_px: float | None = None,
         if e.circle is not None:
             r_ball = ball_radius_px(e.ball_radius_mm, scale)
             if e.circle.r > RADIUS_TOLERANCE * r_ball:
-                half = " (or is it a diameter?)" if e.circle.r <= 2 * RADIUS_TOLERANCE * r_ball \
-                    else ""
+                half = " (or is it a diameter?)" if _a_diameter(e.circle.r, r_ball) else ""
                 raise VtsError(f"press {e.id}: circle radius {e.circle.r:g} px is larger than "
                                f"the ball ({e.ball_radius_mm:g} mm = {r_ball:.1f} px at "
                                f"{scale[0]:g} mm/px); check the scale or the ball radius{half}",
